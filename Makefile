@@ -1,0 +1,41 @@
+# Set-up and checks. `make demo` and `make test` are the only two commands a fresh clone needs.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.install-stamp
+# robosuite 1.5.2 pins mink==0.0.5 -> numpy<2, which conflicts with lerobot (numpy>=2); mink is an
+# optional import, so robosuite goes in with --no-deps and pyproject.toml lists its real needs.
+ROBOSUITE := robosuite==1.5.2
+PYTEST_ARGS ?=
+export MUJOCO_GL ?= egl
+
+.PHONY: install test lint format demo clean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml Makefile
+	@if ! [ -x $(PY) ] || ! $(PY) -c 'import sys; sys.exit(sys.version_info < (3, 12))' 2>/dev/null; then \
+	  python=$$(scripts/find_python.sh) || exit 1; \
+	  echo "creating $(VENV) with $$python"; rm -rf $(VENV); "$$python" -m venv $(VENV) || exit 1; \
+	fi
+	$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
+	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
+	$(PY) -m pip install -q --disable-pip-version-check --no-deps $(ROBOSUITE)
+	@touch $(STAMP)
+
+test: install
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: install
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+
+demo: install
+	$(PY) scripts/demo.py
+
+clean:
+	rm -rf $(VENV) outputs .pytest_cache .ruff_cache

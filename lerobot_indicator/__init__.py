@@ -1,0 +1,3 @@
+"""lerobot-indicator: indicator-reward goal-conditioned RL (Lin, Baweja, Held, CoRL 2019) as a LeRobot plugin."""
+
+import lerobot_indicator.policy  # noqa: F401  (registers the indicator_ddpg policy type)

@@ -1,0 +1,121 @@
+"""Config of the online trainer, shaped like ``lerobot-train``'s (``--policy.*``, ``--env.type``,
+``--dataset.*``, ``--output_dir``, ``--seed``, ``--steps``, ``--env_eval_freq``, ``--save_freq``,
+``--resume``) plus the online loop's own knobs under ``--online.*`` and ``--record.*``."""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import draccus
+from lerobot import envs
+from lerobot.configs import parser
+from lerobot.configs.default import DatasetConfig, WandBConfig
+from lerobot.configs.policies import PreTrainedConfig
+from lerobot.utils.hub import HubMixin
+
+TRAIN_CONFIG_NAME = "train_config.json"
+
+
+@dataclass
+class OnlineConfig:
+    """Paper Algorithm 1: each cycle collects episodes, then runs optimisation steps."""
+
+    # Parallel env processes (gymnasium AsyncVectorEnv when > 1 and use_async_envs).
+    n_envs: int = 2
+    use_async_envs: bool = True
+    # Episodes collected per cycle (rounded up to a multiple of n_envs) and gradient steps per cycle.
+    episodes_per_cycle: int = 2
+    updates_per_cycle: int = 40
+    # Batch size; None = the paper's (256 for state inputs, 128 for images).
+    batch_size: int | None = None
+    # Replay capacity in transitions; None = the paper's (1e6 state, 5e3 visual).
+    buffer_capacity: int | None = None
+    # Random-action episodes before the first update (exploration warm-up).
+    warmup_episodes: int = 0
+    # Evaluation episodes (deterministic actor) every env_eval_freq steps.
+    eval_episodes: int = 20
+
+
+@dataclass
+class RecordConfig:
+    """Write every collected rollout to a LeRobotDataset (None repo_id = don't)."""
+
+    repo_id: str | None = None
+    root: str | None = None
+    push_to_hub: bool = False
+
+
+@dataclass
+class OnlineTrainConfig(HubMixin):
+    env: envs.EnvConfig
+    policy: PreTrainedConfig | None = None
+    # Optional offline data: seeds the replay buffer before online collection.
+    dataset: DatasetConfig | None = None
+    online: OnlineConfig = field(default_factory=OnlineConfig)
+    record: RecordConfig = field(default_factory=RecordConfig)
+    output_dir: Path | None = None
+    job_name: str | None = None
+    resume: bool = False
+    seed: int = 1000
+    # Total optimisation steps (gradient updates), as in lerobot-train. Cycles = steps / updates_per_cycle.
+    steps: int = 2000
+    # In optimisation steps, checked at cycle ends (0 disables). Eval also runs after the last cycle.
+    env_eval_freq: int = 400
+    save_freq: int = 1000
+    log_freq: int = 200
+    save_checkpoint: bool = True
+    wandb: WandBConfig = field(default_factory=WandBConfig)
+    # Filled by validate() on --resume: the checkpoint to continue from.
+    checkpoint_path: Path | None = field(init=False, default=None)
+
+    def validate(self) -> None:
+        policy_path = parser.get_path_arg("policy")
+        if policy_path:
+            overrides = parser.get_cli_overrides("policy")
+            self.policy = PreTrainedConfig.from_pretrained(policy_path, cli_overrides=overrides)
+            self.policy.pretrained_path = Path(policy_path)
+        if self.policy is None:
+            raise ValueError(
+                "No policy configured: pass --policy.type=indicator_ddpg (or --policy.path=...)."
+            )
+        if self.policy.type != "indicator_ddpg":
+            raise ValueError(
+                f"the online trainer trains indicator_ddpg policies, got --policy.type={self.policy.type}"
+            )
+        o = self.online
+        for name in ("n_envs", "episodes_per_cycle", "updates_per_cycle", "eval_episodes"):
+            if getattr(o, name) < 1:
+                raise ValueError(f"--online.{name} must be >= 1, got {getattr(o, name)}")
+        if self.steps < o.updates_per_cycle:
+            raise ValueError(f"--steps={self.steps} is less than one cycle (--online.updates_per_cycle)")
+        if not self.job_name:
+            self.job_name = f"{self.env.type}_{self.policy.type}_online"
+        if self.output_dir is None:
+            now = dt.datetime.now()
+            self.output_dir = Path("outputs/train") / f"{now:%Y-%m-%d}/{now:%H-%M-%S}_{self.job_name}"
+        self.output_dir = Path(self.output_dir)
+        if self.resume:
+            last = self.output_dir / "checkpoints" / "last"
+            if not last.exists():
+                raise FileNotFoundError(f"--resume=true but there is no checkpoint at {last}")
+            self.checkpoint_path = last.resolve()
+            self.policy.pretrained_path = self.checkpoint_path / "pretrained_model"
+        elif self.output_dir.is_dir() and any(self.output_dir.iterdir()):
+            raise FileExistsError(
+                f"Output directory {self.output_dir} already exists and --resume=false. "
+                "Pass --resume=true to continue it, or choose another --output_dir."
+            )
+        if self.policy.push_to_hub and not self.policy.repo_id:
+            raise ValueError(
+                "--policy.push_to_hub=true needs --policy.repo_id (or pass --policy.push_to_hub=false)"
+            )
+
+    @classmethod
+    def __get_path_fields__(cls) -> list[str]:
+        return ["policy"]
+
+    def _save_pretrained(self, save_directory: Path) -> None:
+        with open(Path(save_directory) / TRAIN_CONFIG_NAME, "w") as f, draccus.config_type("json"):
+            draccus.dump(self, f, indent=4)

@@ -1,0 +1,342 @@
+"""``lerobot-indicator-train``: online training of ``indicator_ddpg`` from its own rollouts.
+
+Paper Algorithm 1: each *cycle* collects episodes with the behaviour policy into an episode replay
+buffer, then runs optimisation steps whose relabeling, indicator reward, filtering and DDPG losses
+come from the same learning core as ``lerobot-train`` (``IndicatorDDPGPolicy.forward``).
+
+Crash safety: after every cycle the run's resume state (weights, optimizer, counters) is rewritten
+atomically and the cycle's new episodes are appended to ``replay/``, so a run killed mid-cycle loses
+at most that cycle, and ``--resume=true`` continues bit for bit on CPU (every cycle's randomness is
+seeded from ``(seed, cycle)``). LeRobot-layout checkpoints (``checkpoints/<step>/pretrained_model``,
+loadable by ``lerobot-eval --policy.path``) are written every ``save_freq`` steps and at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from lerobot.common.train_utils import get_step_checkpoint_dir, save_checkpoint, update_last_checkpoint
+from lerobot.configs import parser
+from lerobot.envs import close_envs, make_env, make_env_pre_post_processors
+from lerobot.optim import load_optimizer_state, save_optimizer_state
+from lerobot.policies import make_policy, make_pre_post_processors
+from lerobot.utils.import_utils import register_third_party_plugins
+from lerobot.utils.random_utils import set_seed
+from lerobot.utils.utils import init_logging
+from safetensors.torch import load_file, save_file
+from tqdm import tqdm
+
+from lerobot_indicator.policy import indicator_core as core
+from lerobot_indicator.training.config import OnlineTrainConfig
+from lerobot_indicator.training.plots import plot_learning_curve
+from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
+from lerobot_indicator.training.rollout import Processors, Rollouts, run_episodes, stored_keys
+
+METRICS_FILE = "metrics.jsonl"
+RESUME_DIR = "resume"
+REPLAY_DIR = "replay"
+EVAL_SEED_OFFSET = 10**9  # evaluation episodes never share seeds with training episodes
+
+
+@dataclass
+class Progress:
+    """Counters saved with the resume state."""
+
+    cycle: int = 0
+    step: int = 0
+    env_steps: int = 0
+    episodes: int = 0
+    wall_time_s: float = 0.0
+    replay_files: list[str] = field(default_factory=list)
+
+
+def cycle_seed(seed: int, cycle: int) -> int:
+    return (seed * 1_000_003 + cycle) % (2**63)
+
+
+def to_transition_batch(sample: dict, keys: list[str], device: torch.device) -> dict[str, torch.Tensor]:
+    """Replay-buffer sample -> the learning core's transition batch (``indicator_core`` docstring)."""
+
+    def t(x: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(x)).to(device)
+
+    batch = {core.ACTION: t(sample["action"]), core.HAS_FUTURE: t(sample["has_future"])}
+    for k in keys:
+        batch[k] = t(sample["obs"][k])
+        batch[core.NEXT + k] = t(sample["next_obs"][k])
+        batch[core.FUTURE + k] = t(sample["future_obs"][k])
+    for k in (k for k in sample["obs"] if k not in batch):
+        batch[k] = t(sample["obs"][k])  # the recorded goals
+    if "gt_next_achieved" in sample:
+        batch[core.GT_NEXT_ACHIEVED] = t(sample["gt_next_achieved"])
+        batch[core.GT_FUTURE_ACHIEVED] = t(sample["gt_future_achieved"])
+        batch[core.GT_DESIRED] = t(sample["gt_desired"])
+    return batch
+
+
+class OnlineTrainer:
+    """Owns the env, policy, optimizer, buffer and the run directory of one online training run."""
+
+    def __init__(self, cfg: OnlineTrainConfig):
+        self.cfg = cfg
+        self.out = Path(cfg.output_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        set_seed(cfg.seed)
+        o = cfg.online
+        self.vec_env = make_env(cfg.env, n_envs=o.n_envs, use_async_envs=o.use_async_envs)[cfg.env.type][0]
+        env_pre, env_post = make_env_pre_post_processors(cfg.env, cfg.policy)
+        self.horizon = int(self.vec_env.call("_max_episode_steps")[0])
+        if cfg.policy.horizon != self.horizon:
+            logging.info(
+                "policy.horizon %d -> %d (the env's episode length)", cfg.policy.horizon, self.horizon
+            )
+            cfg.policy.horizon = self.horizon
+        epsilon = getattr(cfg.env, "epsilon", None)
+        if epsilon is not None and cfg.policy.oracle_epsilon != epsilon:
+            logging.info(
+                "policy.oracle_epsilon %g -> %g (the env's success threshold)",
+                cfg.policy.oracle_epsilon,
+                epsilon,
+            )
+            cfg.policy.oracle_epsilon = float(epsilon)
+        self.policy = make_policy(cfg.policy, env_cfg=cfg.env)
+        self.device = next(self.policy.parameters()).device
+        pre, post = make_pre_post_processors(cfg.policy, pretrained_path=cfg.policy.pretrained_path)
+        self.processors = Processors(env_pre=env_pre, env_post=env_post, pre=pre, post=post)
+        self.optimizer = cfg.policy.get_optimizer_preset().build(self.policy.get_optim_params())
+        self.keys = cfg.policy.observation_keys
+        visual = any(
+            ft.type.name == "VISUAL" for k, ft in cfg.policy.input_features.items() if k in self.keys
+        )
+        self.batch_size = o.batch_size or (128 if visual else 256)
+        capacity = o.buffer_capacity or (5_000 if visual else 1_000_000)
+        self.buffer = EpisodeReplayBuffer(capacity, self.horizon)
+        self.progress = Progress()
+        self.n_cycles = math.ceil(cfg.steps / o.updates_per_cycle)
+        self.rounds_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs)
+
+    # ---------------- resume state ----------------
+    def _save_resume_state(self) -> None:
+        """Atomic: write resume.tmp/, then swap it in; a crash leaves the previous state intact."""
+        tmp, final, old = (self.out / f"{RESUME_DIR}{s}" for s in (".tmp", "", ".old"))
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        save_file(self.policy.state_dict(), tmp / "model.safetensors")
+        save_optimizer_state(self.optimizer, tmp)
+        (tmp / "progress.json").write_text(json.dumps(self.progress.__dict__))
+        if final.exists():
+            final.rename(old)
+        tmp.rename(final)
+        shutil.rmtree(old, ignore_errors=True)
+
+    def _load_resume_state(self) -> None:
+        state = self.out / RESUME_DIR
+        if not state.exists() and (self.out / f"{RESUME_DIR}.old").exists():
+            state = self.out / f"{RESUME_DIR}.old"  # crashed between the two renames
+        if not state.exists():
+            raise FileNotFoundError(f"--resume=true but {self.out} has no resume state ({RESUME_DIR}/)")
+        self.policy.load_state_dict(load_file(state / "model.safetensors"))
+        self.optimizer = load_optimizer_state(self.optimizer, state)
+        self.progress = Progress(**json.loads((state / "progress.json").read_text()))
+        for name in self.progress.replay_files:
+            with np.load(self.out / REPLAY_DIR / name) as chunk:
+                self._add_chunk(dict(chunk))
+        metrics = self.out / METRICS_FILE
+        if metrics.exists():  # drop lines written after the state we resume from
+            lines = [
+                ln for ln in metrics.read_text().splitlines() if json.loads(ln)["cycle"] < self.progress.cycle
+            ]
+            metrics.write_text("".join(f"{ln}\n" for ln in lines))
+        logging.info("resumed at cycle %d, step %d", self.progress.cycle, self.progress.step)
+
+    def _append_replay(self, rollouts: list[Rollouts]) -> None:
+        """Persist this cycle's episodes (one small file per cycle); files whose episodes the FIFO has
+        already evicted are deleted, so disk use stays bounded by the buffer capacity."""
+        chunk = {
+            f"obs/{k}": np.concatenate([r.observations[k] for r in rollouts])
+            for k in rollouts[0].observations
+        }
+        chunk["actions"] = np.concatenate([r.actions for r in rollouts])
+        if rollouts[0].gt_achieved is not None:
+            chunk["gt_achieved"] = np.concatenate([r.gt_achieved for r in rollouts])
+            chunk["gt_desired"] = np.concatenate([r.gt_desired for r in rollouts])
+        (self.out / REPLAY_DIR).mkdir(exist_ok=True)
+        name = f"cycle_{self.progress.cycle:07d}.npz"
+        np.savez(self.out / REPLAY_DIR / name, **chunk)
+        self.progress.replay_files.append(name)
+        per_file = chunk["actions"].shape[0]
+        while len(self.progress.replay_files) > math.ceil(self.buffer.capacity / per_file) + 1:
+            (self.out / REPLAY_DIR / self.progress.replay_files.pop(0)).unlink(missing_ok=True)
+
+    def _add_chunk(self, chunk: dict[str, np.ndarray]) -> None:
+        obs = {k[4:]: v for k, v in chunk.items() if k.startswith("obs/")}
+        for i in range(chunk["actions"].shape[0]):
+            gt = None
+            if "gt_achieved" in chunk:
+                gt = {"gt_achieved_goal": chunk["gt_achieved"][i], "gt_desired_goal": chunk["gt_desired"][i]}
+            self.buffer.add_episode({k: v[i] for k, v in obs.items()}, chunk["actions"][i], gt)
+
+    # ---------------- the loop ----------------
+    def collect(self, cycle: int, generator: torch.Generator, warmup: bool) -> list[Rollouts]:
+        n = self.cfg.online.n_envs
+        rollouts = []
+        for r in range(self.rounds_per_cycle):
+            base = cycle_seed(self.cfg.seed, cycle) % 10**8 * 64 + r * n
+            rollouts.append(
+                run_episodes(
+                    self.vec_env,
+                    self.policy,
+                    self.processors,
+                    stored_keys(self.keys),
+                    self.horizon,
+                    seeds=[base + i for i in range(n)],
+                    explore=True,
+                    generator=generator,
+                    random_eps=1.0 if warmup else None,
+                )
+            )
+        return rollouts
+
+    def evaluate(self) -> dict[str, float]:
+        n = self.cfg.online.n_envs
+        results = [
+            run_episodes(
+                self.vec_env,
+                self.policy,
+                self.processors,
+                stored_keys(self.keys),
+                self.horizon,
+                seeds=[EVAL_SEED_OFFSET + s + i for i in range(n)],
+                explore=False,
+            )
+            for s in range(0, self.cfg.online.eval_episodes, n)
+        ]
+        success = np.concatenate([r.success for r in results])[: self.cfg.online.eval_episodes]
+        dist = np.concatenate([r.final_distance for r in results])[: self.cfg.online.eval_episodes]
+        return {"eval_success_rate": float(success.mean()), "eval_final_distance": float(np.nanmean(dist))}
+
+    def optimise(self, rng: np.random.Generator, generator: torch.Generator) -> dict[str, float]:
+        self.policy.train()
+        sums: dict[str, float] = {}
+        for _ in range(self.cfg.online.updates_per_cycle):
+            batch = to_transition_batch(self.buffer.sample(self.batch_size, rng), self.keys, self.device)
+            loss, stats = self.policy.forward(batch, generator=generator)
+            self.optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            self.optimizer.step()
+            self.policy.update()
+            self.progress.step += 1
+            for k, v in stats.items():
+                sums[k] = sums.get(k, 0.0) + v
+        return {k: v / self.cfg.online.updates_per_cycle for k, v in sums.items()}
+
+    def save_checkpoint(self) -> Path:
+        """LeRobot-train layout, loadable by ``lerobot-eval --policy.path=<dir>/pretrained_model``."""
+        ckpt = get_step_checkpoint_dir(self.out, self.cfg.steps, self.progress.step)
+        save_checkpoint(
+            ckpt,
+            self.progress.step,
+            self.cfg,
+            self.policy,
+            self.optimizer,
+            None,
+            self.processors.pre,
+            self.processors.post,
+        )
+        update_last_checkpoint(ckpt)
+        return ckpt
+
+    def train(self) -> dict[str, float]:
+        cfg, o = self.cfg, self.cfg.online
+        if cfg.resume:
+            self._load_resume_state()
+        last_eval: dict[str, float] = {}
+        bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
+        while self.progress.cycle < self.n_cycles:
+            t0, cycle = time.perf_counter(), self.progress.cycle
+            generator = torch.Generator().manual_seed(cycle_seed(cfg.seed, cycle))
+            rng = np.random.default_rng([cfg.seed, cycle])
+            warmup = self.progress.episodes < o.warmup_episodes
+            rollouts = self.collect(cycle, generator, warmup)
+            for r in rollouts:
+                for episode in r.episodes():
+                    self.buffer.add_episode(*episode)
+            self._append_replay(rollouts)
+            n_episodes = sum(r.actions.shape[0] for r in rollouts)
+            self.progress.episodes += n_episodes
+            self.progress.env_steps += n_episodes * self.horizon
+            stats = self.optimise(rng, generator)
+            prev_step = self.progress.step - o.updates_per_cycle
+            is_last = cycle == self.n_cycles - 1
+            record = {
+                "cycle": cycle,
+                "step": self.progress.step,
+                "env_steps": self.progress.env_steps,
+                "episodes": self.progress.episodes,
+                "train_success_rate": float(np.concatenate([r.success for r in rollouts]).mean()),
+                "train_final_distance": float(
+                    np.nanmean(np.concatenate([r.final_distance for r in rollouts]))
+                ),
+                **stats,
+            }
+            if is_last or (
+                cfg.env_eval_freq > 0
+                and self.progress.step // cfg.env_eval_freq > prev_step // cfg.env_eval_freq
+            ):
+                last_eval = self.evaluate()
+                record.update(last_eval)
+            self.progress.cycle += 1
+            self.progress.wall_time_s += time.perf_counter() - t0
+            record["wall_time_s"] = self.progress.wall_time_s
+            with open(self.out / METRICS_FILE, "a") as f:
+                f.write(json.dumps(record) + "\n")
+            if cfg.save_checkpoint and (
+                is_last
+                or (cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq)
+            ):
+                self.save_checkpoint()
+            self._save_resume_state()
+            bar.update(o.updates_per_cycle)
+            bar.set_postfix(
+                env_steps=self.progress.env_steps,
+                success=f"{record.get('eval_success_rate', record['train_success_rate']):.2f}",
+                q=f"{stats.get('q_mean', float('nan')):.2f}",
+            )
+        bar.close()
+        plot_learning_curve(self.out / METRICS_FILE, self.out / "learning_curve.png", title=cfg.job_name)
+        if cfg.policy.push_to_hub:
+            self.policy.push_model_to_hub(cfg)
+            self.processors.pre.push_to_hub(cfg.policy.repo_id)
+            self.processors.post.push_to_hub(cfg.policy.repo_id)
+        return {**last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
+
+    def close(self) -> None:
+        close_envs({self.cfg.env.type: {0: self.vec_env}})
+
+
+@parser.wrap()
+def train(cfg: OnlineTrainConfig) -> dict[str, float]:
+    cfg.validate()
+    trainer = OnlineTrainer(cfg)
+    try:
+        return trainer.train()
+    finally:
+        trainer.close()
+
+
+def main() -> None:
+    init_logging()
+    register_third_party_plugins()
+    train()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,222 @@
+"""Episode replay buffer for the online trainer (paper Algorithm 1).
+
+Whole episodes are stored, because relabeling needs future observations *of the same episode*.
+
+Observations are stored under the policy's batch keys (``observation.images.front``...), i.e. after
+LeRobot's ``preprocess_observation`` and the env processors, exactly as eval and datasets deliver
+them, so there is one conversion path and a dataset can seed the buffer. To keep a 5e3-transition
+visual buffer small they are packed losslessly: RGB in [0, 1] that is k/255 goes back to uint8,
+integer-valued depth to uint16 (checked on every episode; a key that stops packing exactly is
+widened to float32). Goal observations are constant within an episode and stored once per episode.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from lerobot_indicator.keys import is_goal_key
+
+Arrays = dict[str, np.ndarray]
+_PACKINGS = ((np.uint8, 255.0), (np.uint16, 1.0))
+
+
+def _unpack(stored: np.ndarray, scale: float) -> np.ndarray:
+    out = stored.astype(np.float32)
+    return out if scale == 1.0 else out / np.float32(scale)
+
+
+def _pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarray | None:
+    """``value`` as ``dtype`` such that ``_unpack`` gives it back bit for bit, or None."""
+    value = np.asarray(value, dtype=np.float32)
+    info = np.iinfo(dtype)
+    scaled = np.rint(value * np.float32(scale))
+    if scaled.size and (scaled.min() < info.min or scaled.max() > info.max):
+        return None
+    packed = scaled.astype(dtype)
+    return packed if np.array_equal(_unpack(packed, scale), value) else None
+
+
+class _PackedArray:
+    """A ``(rows, ...)`` float32 array stored in the smallest dtype that holds it exactly."""
+
+    def __init__(self, shape: tuple[int, ...], first: np.ndarray):
+        self.dtype, self.scale = np.dtype(np.float32), 1.0
+        for dtype, scale in _PACKINGS:
+            if _pack_exactly(first, np.dtype(dtype), scale) is not None:
+                self.dtype, self.scale = np.dtype(dtype), scale
+                break
+        self.data = np.zeros(shape, dtype=self.dtype)
+
+    def __setitem__(self, index, value: np.ndarray) -> None:
+        if self.dtype.kind != "f":
+            packed = _pack_exactly(value, self.dtype, self.scale)
+            if packed is not None:
+                self.data[index] = packed
+                return
+            self.data, self.dtype, self.scale = self[:], np.dtype(np.float32), 1.0  # widen
+        self.data[index] = value
+
+    def __getitem__(self, index) -> np.ndarray:
+        return _unpack(self.data[index], self.scale)
+
+
+class EpisodeReplayBuffer:
+    """FIFO buffer of fixed-horizon episodes.
+
+    An episode is ``T`` actions and ``T + 1`` observations ``o_0..o_T``; transition ``t`` is
+    ``(o_t, a_t, o_{t+1})``. Ground truth (optional; evaluation, oracle and reward-accuracy stats
+    only) is ``gt_achieved_goal`` per observation and ``gt_desired_goal`` per episode.
+    """
+
+    def __init__(self, capacity_transitions: int, horizon: int):
+        if horizon < 1:
+            raise ValueError(f"horizon must be >= 1, got {horizon}")
+        if capacity_transitions < horizon:
+            raise ValueError(
+                f"capacity ({capacity_transitions} transitions) must hold at least one episode of {horizon}"
+            )
+        self.horizon = horizon
+        self.capacity = capacity_transitions // horizon  # in episodes
+        self.obs: dict[str, _PackedArray] = {}  # (capacity, T + 1, ...) per non-goal key
+        self.goals: dict[str, _PackedArray] = {}  # (capacity, ...) per goal key
+        self.actions: np.ndarray | None = None  # (capacity, T, action_dim)
+        self.gt_achieved: np.ndarray | None = None  # (capacity, T + 1, goal_dim)
+        self.gt_desired: np.ndarray | None = None  # (capacity, goal_dim)
+        self.num_episodes = 0
+        self.next_slot = 0
+        self.total_episodes_added = 0
+
+    def __len__(self) -> int:
+        """Number of stored transitions."""
+        return self.num_episodes * self.horizon
+
+    @property
+    def keys(self) -> list[str]:
+        return sorted([*self.obs, *self.goals])
+
+    def _allocate(self, observations: Arrays, actions: np.ndarray, gt: Mapping | None) -> None:
+        cap, T = self.capacity, self.horizon
+        for key, value in observations.items():
+            if is_goal_key(key):
+                self.goals[key] = _PackedArray((cap, *value.shape[1:]), value[:1])
+            else:
+                self.obs[key] = _PackedArray((cap, T + 1, *value.shape[1:]), value)
+        self.actions = np.zeros((cap, T, actions.shape[-1]), dtype=np.float32)
+        if gt is not None:
+            self.gt_achieved = np.zeros((cap, T + 1, gt["gt_achieved_goal"].shape[-1]), dtype=np.float32)
+            self.gt_desired = np.zeros((cap, gt["gt_desired_goal"].shape[-1]), dtype=np.float32)
+
+    def add_episode(
+        self, observations: Arrays, actions: np.ndarray, ground_truth: Mapping | None = None
+    ) -> None:
+        """Store one episode.
+
+        Args:
+            observations: policy key -> ``(T + 1, ...)`` float array. Goal keys only need a leading
+                step axis of any length (``(1, ...)`` is fine): a goal is constant within an episode.
+            actions: ``(T, action_dim)``.
+            ground_truth: optional ``gt_achieved_goal`` ``(T + 1, g)`` and ``gt_desired_goal`` ``(g,)``.
+        """
+        T = self.horizon
+        if actions.shape[0] != T:
+            raise ValueError(f"episode has {actions.shape[0]} actions, buffer horizon is {T}")
+        for key, value in observations.items():
+            if not is_goal_key(key) and value.shape[0] != T + 1:
+                raise ValueError(f"observation {key!r} has {value.shape[0]} steps, expected T + 1 = {T + 1}")
+        if self.actions is None:
+            self._allocate(observations, actions, ground_truth)
+        if sorted(observations) != self.keys:
+            raise ValueError(f"episode keys {sorted(observations)} differ from the buffer's {self.keys}")
+        if (self.gt_achieved is not None) != (ground_truth is not None):
+            raise ValueError("either every episode in a buffer carries ground truth or none does")
+        slot = self.next_slot
+        for key, value in observations.items():
+            if is_goal_key(key):
+                self.goals[key][slot] = value[0]
+            else:
+                self.obs[key][slot] = value
+        self.actions[slot] = actions
+        if ground_truth is not None:
+            self.gt_achieved[slot] = ground_truth["gt_achieved_goal"]
+            self.gt_desired[slot] = ground_truth["gt_desired_goal"]
+        self.next_slot = (slot + 1) % self.capacity
+        self.num_episodes = min(self.num_episodes + 1, self.capacity)
+        self.total_episodes_added += 1
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict:
+        """Sample transitions uniformly, each with one future observation of its own episode.
+
+        The future index is uniform in ``{t+2, ..., T}`` (paper Algorithm 1). For ``t = T - 1`` that
+        set is empty: ``has_future`` is False and ``future_obs`` holds ``o_T`` as a placeholder.
+        Returns float32 dicts ``obs`` (goal keys included: the recorded goal), ``next_obs`` and
+        ``future_obs``, plus ``action``, ``has_future`` and, when stored, ground truth
+        ``gt_next_achieved``, ``gt_future_achieved`` and ``gt_desired``.
+        """
+        if self.num_episodes == 0:
+            raise RuntimeError("cannot sample from an empty replay buffer")
+        T = self.horizon
+        ep = rng.integers(0, self.num_episodes, size=batch_size)
+        t = rng.integers(0, T, size=batch_size)
+        has_future = t + 2 <= T
+        span = np.maximum(T - t - 1, 1)  # |{t+2..T}|, 1 where empty (masked)
+        future = np.where(has_future, t + 2 + (rng.random(batch_size) * span).astype(np.int64), T)
+        obs = {k: v[ep, t] for k, v in self.obs.items()}
+        obs.update({k: v[ep] for k, v in self.goals.items()})
+        batch = {
+            "obs": obs,
+            "next_obs": {k: v[ep, t + 1] for k, v in self.obs.items()},
+            "future_obs": {k: v[ep, future] for k, v in self.obs.items()},
+            "action": self.actions[ep, t],
+            "has_future": has_future,
+            "episode": ep,
+            "t": t,
+            "future_t": future,
+        }
+        if self.gt_achieved is not None:
+            batch["gt_next_achieved"] = self.gt_achieved[ep, t + 1]
+            batch["gt_future_achieved"] = self.gt_achieved[ep, future]
+            batch["gt_desired"] = self.gt_desired[ep]
+        return batch
+
+    # ---- persistence (resume) ----
+    def save(self, path: Path) -> None:
+        """Write atomically (tmp file + rename): a crash mid-write never corrupts the last copy."""
+        n = self.num_episodes
+        arrays = {f"obs/{k}": v.data[:n] for k, v in self.obs.items()}
+        arrays.update({f"goal/{k}": v.data[:n] for k, v in self.goals.items()})
+        arrays.update({f"scale/{k}": np.float32(v.scale) for k, v in {**self.obs, **self.goals}.items()})
+        if self.actions is not None:
+            arrays["actions"] = self.actions[:n]
+        if self.gt_achieved is not None:
+            arrays["gt_achieved"], arrays["gt_desired"] = self.gt_achieved[:n], self.gt_desired[:n]
+        meta = np.array([self.horizon, self.capacity, n, self.next_slot, self.total_episodes_added])
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, meta=meta, **arrays)
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path) -> EpisodeReplayBuffer:
+        with np.load(path) as data:
+            horizon, capacity, n, next_slot, total = (int(x) for x in data["meta"])
+            buf = cls(capacity * horizon, horizon)
+            if n:
+                buf.actions = np.zeros((capacity, horizon, data["actions"].shape[-1]), np.float32)
+                buf.actions[:n] = data["actions"]
+                for prefix, store in (("obs/", buf.obs), ("goal/", buf.goals)):
+                    for name in (f for f in data.files if f.startswith(prefix)):
+                        key, stored = name[len(prefix) :], data[name]
+                        packed = _PackedArray.__new__(_PackedArray)
+                        packed.dtype, packed.scale = stored.dtype, float(data[f"scale/{key}"])
+                        packed.data = np.zeros((capacity, *stored.shape[1:]), stored.dtype)
+                        packed.data[:n] = stored
+                        store[key] = packed
+                if "gt_achieved" in data.files:
+                    buf.gt_achieved = np.zeros((capacity, *data["gt_achieved"].shape[1:]), np.float32)
+                    buf.gt_desired = np.zeros((capacity, *data["gt_desired"].shape[1:]), np.float32)
+                    buf.gt_achieved[:n], buf.gt_desired[:n] = data["gt_achieved"], data["gt_desired"]
+        buf.num_episodes, buf.next_slot, buf.total_episodes_added = n, next_slot, total
+        return buf

@@ -1,0 +1,106 @@
+"""Online trainer end to end at tiny sizes: checkpoints in lerobot-train's layout, lerobot-eval loads
+them, and --resume continues bit for bit."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BIN = Path(sys.executable).parent
+TINY = [
+    "--policy.type=indicator_ddpg",
+    "--policy.push_to_hub=false",
+    "--policy.device=cpu",
+    "--online.n_envs=1",
+    "--online.use_async_envs=false",
+    "--online.episodes_per_cycle=1",
+    "--online.updates_per_cycle=5",
+    "--online.batch_size=16",
+    "--online.eval_episodes=1",
+    "--env_eval_freq=10",
+    "--save_freq=10",
+    "--seed=7",
+]
+ENVS = {"sawyer_reach": ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]}
+
+
+def _train(out: Path, *args: str) -> subprocess.CompletedProcess:
+    cmd = [str(BIN / "lerobot-indicator-train"), *TINY, f"--output_dir={out}", *args]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
+    return proc
+
+
+def _metrics(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+
+
+@pytest.mark.parametrize("env_type", sorted(ENVS))
+def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
+    out = tmp_path / "run"
+    _train(out, *ENVS[env_type], "--steps=10")
+    rows = _metrics(out)
+    assert [r["cycle"] for r in rows] == [0, 1]
+    assert rows[-1]["step"] == 10 and rows[-1]["env_steps"] == 2 * 5
+    for key in ("critic_loss", "actor_loss", "q_mean", "frac_positive", "frac_filtered", "reward_accuracy"):
+        assert key in rows[-1], key
+    assert "eval_success_rate" in rows[-1] and "eval_final_distance" in rows[-1]
+    assert (out / "learning_curve.png").stat().st_size > 0
+    pretrained = out / "checkpoints" / "last" / "pretrained_model"
+    for name in ("config.json", "model.safetensors", "train_config.json"):
+        assert (pretrained / name).exists(), name
+    assert (out / "checkpoints" / "000010" / "training_state" / "training_step.json").exists()
+
+    eval_dir = tmp_path / "eval"
+    proc = subprocess.run(
+        [
+            str(BIN / "lerobot-eval"),
+            f"--policy.path={pretrained}",
+            *[a for a in ENVS[env_type]],
+            "--eval.n_episodes=2",
+            "--eval.batch_size=1",
+            "--policy.device=cpu",
+            f"--output_dir={eval_dir}",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    overall = json.loads((eval_dir / "eval_info.json").read_text())["overall"]
+    assert 0.0 <= overall["pc_success"] <= 100.0
+
+
+def test_resume_continues_bit_for_bit(tmp_path):
+    env_args = ENVS["sawyer_reach"]
+    full, split = tmp_path / "full", tmp_path / "split"
+    _train(full, *env_args, "--steps=20")
+    _train(split, *env_args, "--steps=10")  # "killed" after two cycles
+    _train(split, *env_args, "--steps=20", "--resume=true")
+    a, b = _metrics(full), _metrics(split)
+    assert [r["step"] for r in b] == [5, 10, 15, 20], "resume must continue the step counter"
+    for ra, rb in zip(a, b, strict=True):
+        for key in ("critic_loss", "actor_loss", "q_mean", "train_final_distance"):
+            assert ra[key] == rb[key], (ra["cycle"], key, ra[key], rb[key])
+
+
+def test_refuses_to_overwrite_a_run(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "something").write_text("precious")
+    cmd = [
+        str(BIN / "lerobot-indicator-train"),
+        *TINY,
+        *ENVS["sawyer_reach"],
+        f"--output_dir={out}",
+        "--steps=10",
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0
+    assert "already exists" in proc.stderr
+    assert (out / "something").read_text() == "precious"

@@ -27,10 +27,13 @@ TINY = [
 ENVS = {"sawyer_reach": ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]}
 
 
+def _env() -> dict[str, str]:
+    return {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+
+
 def _train(out: Path, *args: str) -> subprocess.CompletedProcess:
     cmd = [str(BIN / "lerobot-indicator-train"), *TINY, f"--output_dir={out}", *args]
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=_env())
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
     return proc
 
@@ -69,7 +72,7 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
         capture_output=True,
         text=True,
         timeout=600,
-        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+        env=_env(),
     )
     assert proc.returncode == 0, proc.stderr[-4000:]
     overall = json.loads((eval_dir / "eval_info.json").read_text())["overall"]

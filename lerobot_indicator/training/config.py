@@ -2,7 +2,6 @@
 ``--dataset.*``, ``--output_dir``, ``--seed``, ``--steps``, ``--env_eval_freq``, ``--save_freq``,
 ``--resume``) plus the online loop's own knobs under ``--online.*`` and ``--record.*``."""
 
-from __future__ import annotations
 
 import datetime as dt
 from dataclasses import dataclass, field
@@ -111,6 +110,11 @@ class OnlineTrainConfig(HubMixin):
             raise ValueError(
                 "--policy.push_to_hub=true needs --policy.repo_id (or pass --policy.push_to_hub=false)"
             )
+
+    @property
+    def peft(self) -> None:
+        """LeRobot's ``save_checkpoint`` reads ``cfg.peft``; PEFT adapters don't apply to this policy."""
+        return None
 
     @classmethod
     def __get_path_fields__(cls) -> list[str]:

@@ -11,7 +11,6 @@ seeded from ``(seed, cycle)``). LeRobot-layout checkpoints (``checkpoints/<step>
 loadable by ``lerobot-eval --policy.path``) are written every ``save_freq`` steps and at the end.
 """
 
-from __future__ import annotations
 
 import json
 import logging
@@ -36,6 +35,7 @@ from tqdm import tqdm
 
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.training.config import OnlineTrainConfig
+from lerobot_indicator.training.dataset_seed import seed_buffer
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import Processors, Rollouts, run_episodes, stored_keys
@@ -55,7 +55,9 @@ class Progress:
     env_steps: int = 0
     episodes: int = 0
     wall_time_s: float = 0.0
-    replay_files: list[str] = field(default_factory=list)
+    seeded_episodes: int = 0  # from --dataset, before any rollout
+    # (file name, global index of its first episode) of the episode chunks still needed to rebuild the buffer
+    replay_files: list[tuple[str, int]] = field(default_factory=list)
 
 
 def cycle_seed(seed: int, cycle: int) -> int:
@@ -146,7 +148,17 @@ class OnlineTrainer:
         self.policy.load_state_dict(load_file(state / "model.safetensors"))
         self.optimizer = load_optimizer_state(self.optimizer, state)
         self.progress = Progress(**json.loads((state / "progress.json").read_text()))
-        for name in self.progress.replay_files:
+        files = self.progress.replay_files
+        if files and files[0][1] > self.progress.seeded_episodes:
+            # Older chunks (and any dataset seed) were evicted by the FIFO: start the buffer where the first
+            # kept chunk started, so every episode lands in the same slot as before the interruption.
+            first = files[0][1]
+            self.buffer.total_episodes_added = first
+            self.buffer.next_slot = first % self.buffer.capacity
+            self.buffer.num_episodes = min(first, self.buffer.capacity)
+        elif self.cfg.dataset is not None:
+            seed_buffer(self.buffer, self.cfg.dataset, stored_keys(self.keys))
+        for name, _ in files:
             with np.load(self.out / REPLAY_DIR / name) as chunk:
                 self._add_chunk(dict(chunk))
         metrics = self.out / METRICS_FILE
@@ -171,10 +183,12 @@ class OnlineTrainer:
         (self.out / REPLAY_DIR).mkdir(exist_ok=True)
         name = f"cycle_{self.progress.cycle:07d}.npz"
         np.savez(self.out / REPLAY_DIR / name, **chunk)
-        self.progress.replay_files.append(name)
-        per_file = chunk["actions"].shape[0]
-        while len(self.progress.replay_files) > math.ceil(self.buffer.capacity / per_file) + 1:
-            (self.out / REPLAY_DIR / self.progress.replay_files.pop(0)).unlink(missing_ok=True)
+        first_index = self.buffer.total_episodes_added - chunk["actions"].shape[0]
+        self.progress.replay_files.append((name, first_index))
+        # A chunk is no longer needed once every one of its episodes has been evicted.
+        oldest_kept = self.buffer.total_episodes_added - self.buffer.capacity
+        while len(self.progress.replay_files) > 1 and self.progress.replay_files[1][1] <= oldest_kept:
+            (self.out / REPLAY_DIR / self.progress.replay_files.pop(0)[0]).unlink(missing_ok=True)
 
     def _add_chunk(self, chunk: dict[str, np.ndarray]) -> None:
         obs = {k[4:]: v for k, v in chunk.items() if k.startswith("obs/")}
@@ -258,6 +272,9 @@ class OnlineTrainer:
         cfg, o = self.cfg, self.cfg.online
         if cfg.resume:
             self._load_resume_state()
+        elif cfg.dataset is not None:
+            self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
+            self.progress.episodes = self.progress.seeded_episodes
         last_eval: dict[str, float] = {}
         bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
         while self.progress.cycle < self.n_cycles:

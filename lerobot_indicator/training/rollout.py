@@ -66,6 +66,15 @@ def env_batch(obs: dict, vec_env: gym.vector.VectorEnv, env_pre: Any) -> dict:
     return env_pre(batch)
 
 
+def _stack_per_env(items) -> dict:
+    """Gymnasium's SAME_STEP autoreset gives ``final_obs`` as an object array with one observation per
+    sub-env (``final_info`` is already vectorised); stack it back into the vectorised layout."""
+    items = list(items)
+    if isinstance(items[0], dict):
+        return {k: _stack_per_env([it[k] for it in items]) for k in items[0]}
+    return np.stack([np.asarray(it) for it in items])
+
+
 def _info_array(info: dict, key: str) -> np.ndarray | None:
     value = info.get(key)
     return None if value is None else np.asarray(value, dtype=np.float32)
@@ -121,7 +130,9 @@ def run_episodes(
         )
     # With gymnasium's SAME_STEP autoreset (LeRobot's default) the last observation and info live in
     # final_obs / final_info; the top-level ones already belong to the next episode.
-    final_obs, final_info = info.get("final_obs", obs), info.get("final_info", info)
+    final_obs, final_info = obs, info
+    if "final_obs" in info:
+        final_obs, final_info = _stack_per_env(info["final_obs"]), info["final_info"]
     batch = env_batch(final_obs, vec_env, processors.env_pre)
     frames.append({k: batch[k].cpu().numpy() for k in keys})
     achieved.append(_info_array(final_info, GT_ACHIEVED))

@@ -1,0 +1,1 @@
+"""Online training: episode replay buffer, rollouts, the lerobot-indicator-train loop, plots."""

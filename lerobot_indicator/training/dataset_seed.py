@@ -1,0 +1,72 @@
+"""Seed the online replay buffer from a recorded LeRobotDataset (offline data, then online rollouts).
+
+An episode of horizon T is recorded as T + 1 frames ``o_0..o_T`` (the last frame's action is unused),
+so it gives the buffer all T transitions. Frames come back from ``LeRobotDataset`` in the same policy
+layout that rollouts store (float RGB in [0, 1], depth in the dataset's unit), which the buffer packs
+losslessly again.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+
+import numpy as np
+import torch
+from lerobot.configs.default import DatasetConfig
+from lerobot.datasets import LeRobotDataset
+from tqdm import tqdm
+
+from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
+
+GT_ACHIEVED, GT_DESIRED = "observation.gt_achieved_goal", "observation.gt_desired_goal"
+
+
+def load_dataset(cfg: DatasetConfig) -> LeRobotDataset:
+    return LeRobotDataset(
+        cfg.repo_id,
+        root=cfg.root,
+        episodes=cfg.episodes,
+        revision=cfg.revision,
+        video_backend=cfg.video_backend,
+        depth_output_unit=cfg.depth_output_unit,
+    )
+
+
+def dataset_episodes(dataset: LeRobotDataset, keys: list[str], horizon: int) -> Iterator[tuple]:
+    """Yield ``(observations, actions, ground_truth | None)`` per episode, as the buffer takes them."""
+    missing = [k for k in keys if k not in dataset.features]
+    if missing:
+        raise KeyError(
+            f"dataset {dataset.repo_id} lacks the policy's keys {missing}; it has {sorted(dataset.features)}"
+        )
+    has_gt = GT_ACHIEVED in dataset.features and GT_DESIRED in dataset.features
+    episode_index = np.asarray(dataset.hf_dataset["episode_index"])
+    for ep in np.unique(episode_index):
+        rows = np.flatnonzero(episode_index == ep)
+        if len(rows) != horizon + 1:
+            raise ValueError(
+                f"episode {ep} of {dataset.repo_id} has {len(rows)} frames; the env's horizon T={horizon} "
+                f"needs T + 1 = {horizon + 1} (o_0..o_T, as scripts/record.py writes them)"
+            )
+        frames = [dataset[int(i)] for i in rows]
+
+        def stack(key: str, frames=frames) -> np.ndarray:
+            return torch.stack([f[key] for f in frames]).float().numpy()
+
+        obs = {k: stack(k) for k in keys}
+        gt = None
+        if has_gt:
+            gt = {"gt_achieved_goal": stack(GT_ACHIEVED), "gt_desired_goal": stack(GT_DESIRED)[0]}
+        yield obs, stack("action")[:horizon], gt
+
+
+def seed_buffer(buffer: EpisodeReplayBuffer, cfg: DatasetConfig, keys: list[str]) -> int:
+    """Add every episode of the dataset to ``buffer``; returns the number of episodes added."""
+    dataset = load_dataset(cfg)
+    n = 0
+    for episode in tqdm(dataset_episodes(dataset, keys, buffer.horizon), desc="seeding buffer", unit="episode"):
+        buffer.add_episode(*episode)
+        n += 1
+    logging.info("seeded the replay buffer with %d episodes of %s", n, cfg.repo_id)
+    return n

@@ -1,0 +1,183 @@
+"""Shared gymnasium base for goal-conditioned MuJoCo tasks with image goals (reach, rope push).
+
+What every task shares lives here: the observation dict of docs/conventions.md, RGB-D camera rendering,
+rendering the goal observation by putting the simulator in the goal configuration and restoring the
+exact state afterwards, seeding, and ``render()`` for eval videos. A task supplies the model, the episode
+sampling and the action.
+
+Observation dict (``obs_type``: ``state`` | ``rgb`` | ``rgbd``):
+    agent_pos            float32 (D,)      proprio (reach: end-effector xyz)
+    goal_state           float32 (D,)      the same quantity in the goal configuration
+    pixels/<cam>         uint8 HxWx3       rgb, rgbd
+    pixels/goal_<cam>    uint8 HxWx3       rgb, rgbd
+    <cam>_depth          uint16 HxWx1 mm   rgbd (top level: LeRobot's preprocess_observation drops nested
+    goal_<cam>_depth     uint16 HxWx1 mm    non-``pixels`` dicts; the env processor moves them to images)
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.keys import GOAL_PREFIX
+
+OBS_TYPES = ("state", "rgb", "rgbd")
+DEPTH_SUFFIX = "_depth"
+
+
+def depth_obs_key(camera: str) -> str:
+    return f"{camera}{DEPTH_SUFFIX}"
+
+
+def _as(cls, value):
+    if value is None:
+        return cls()
+    if isinstance(value, dict):
+        return cls(**value)
+    if not isinstance(value, cls):
+        raise TypeError(f"expected {cls.__name__} or dict, got {type(value).__name__}")
+    return value
+
+
+class MujocoGoalEnv(gym.Env, abc.ABC):
+    """Goal-conditioned MuJoCo env whose goal observation is rendered from the goal configuration."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
+    state_dim: int = 3
+
+    def __init__(
+        self,
+        obs_type: str = "state",
+        camera: GoalCameraConfig | dict | None = None,
+        end_effector: EndEffectorConfig | dict | None = None,
+        fps: int = 20,
+        render_mode: str | None = "rgb_array",
+    ):
+        if obs_type not in OBS_TYPES:
+            raise ValueError(f"obs_type: unknown {obs_type!r}; expected one of {OBS_TYPES}")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode: only 'rgb_array' is supported, got {render_mode!r}")
+        if fps <= 0:
+            raise ValueError(f"fps must be > 0, got {fps}")
+        self.camera_cfg = _as(GoalCameraConfig, camera)
+        self.ee_cfg = _as(EndEffectorConfig, end_effector)
+        if obs_type == "rgbd" and not self.camera_cfg.use_depth:
+            raise ValueError("obs_type 'rgbd' needs camera.use_depth: true")
+        self.obs_type = obs_type
+        self.render_mode = render_mode
+        self.fps = fps
+        self.metadata = {**self.metadata, "render_fps": fps}
+
+        import mujoco
+
+        from lerobot_indicator.envs.rendering import RGBDRenderer
+
+        self._mj = mujoco
+        self.model = self._build_model()
+        self.data = mujoco.MjData(self.model)
+        self.n_substeps = max(1, round(1.0 / (fps * self.model.opt.timestep)))
+        self._state_spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        self._state_buf = np.empty(mujoco.mj_stateSize(self.model, self._state_spec))
+        self._renderer: RGBDRenderer | None = None
+        self._renderer_cls = RGBDRenderer
+        self._goal_obs: dict[str, np.ndarray] = {}
+
+        cam = self.camera_cfg
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        spaces: dict[str, gym.Space] = {
+            "agent_pos": gym.spaces.Box(-np.inf, np.inf, shape=(self.state_dim,), dtype=np.float32),
+            "goal_state": gym.spaces.Box(-np.inf, np.inf, shape=(self.state_dim,), dtype=np.float32),
+        }
+        if obs_type in ("rgb", "rgbd"):
+            img = gym.spaces.Box(0, 255, shape=(cam.height, cam.width, 3), dtype=np.uint8)
+            spaces["pixels"] = gym.spaces.Dict({cam.name: img, GOAL_PREFIX + cam.name: img})
+        if obs_type == "rgbd":
+            depth = gym.spaces.Box(
+                0, np.iinfo(np.uint16).max, shape=(cam.height, cam.width, 1), dtype=np.uint16
+            )
+            spaces[depth_obs_key(cam.name)] = depth
+            spaces[depth_obs_key(GOAL_PREFIX + cam.name)] = depth
+        self.observation_space = gym.spaces.Dict(spaces)
+
+    # --- what a task provides -------------------------------------------------------------------
+    @abc.abstractmethod
+    def _build_model(self):
+        """Compiled MjModel with a fixed camera named ``camera_cfg.name``."""
+
+    @abc.abstractmethod
+    def _agent_state(self) -> np.ndarray:
+        """Proprio / achieved quantity of the current simulator state (float64)."""
+
+    @abc.abstractmethod
+    def _goal_state(self) -> np.ndarray:
+        """The same quantity in the goal configuration (float64)."""
+
+    @abc.abstractmethod
+    def _enter_goal_configuration(self) -> None:
+        """Put the simulator in the goal configuration (the caller restores the state afterwards)."""
+
+    # --- shared machinery ------------------------------------------------------------------------
+    @property
+    def renderer(self):
+        if self._renderer is None:
+            self._renderer = self._renderer_cls(self.model, self.camera_cfg.width, self.camera_cfg.height)
+        return self._renderer
+
+    def save_state(self) -> np.ndarray:
+        """Full integration state (qpos, qvel, act, mocap, ctrl, warm start, time, ...)."""
+        self._mj.mj_getState(self.model, self.data, self._state_buf, self._state_spec)
+        return self._state_buf.copy()
+
+    def restore_state(self, state: np.ndarray) -> None:
+        """Restore a :meth:`save_state` snapshot; derived quantities are recomputed by ``mj_forward``."""
+        self._mj.mj_setState(self.model, self.data, state, self._state_spec)
+        self._mj.mj_forward(self.model, self.data)
+
+    def _camera_obs(self, prefix: str = "") -> dict[str, np.ndarray]:
+        if self.obs_type == "state":
+            return {}
+        cam = self.camera_cfg
+        rgb, depth_m = self.renderer.render(self.data, cam.name, depth=self.obs_type == "rgbd")
+        out = {prefix + cam.name: rgb}
+        if depth_m is not None:
+            from lerobot_indicator.envs.rendering import metres_to_uint16_mm
+
+            mm = metres_to_uint16_mm(depth_m, cam.depth_min_m, cam.depth_max_m)
+            out[depth_obs_key(prefix + cam.name)] = mm[..., None]
+        return out
+
+    def _render_goal_observation(self) -> None:
+        """Render the goal camera images in the goal configuration, then restore the exact state."""
+        state = self.save_state()
+        self._enter_goal_configuration()
+        self._goal_obs = self._camera_obs(prefix=GOAL_PREFIX)
+        self.restore_state(state)
+
+    def _get_obs(self) -> dict[str, Any]:
+        obs: dict[str, Any] = {
+            "agent_pos": self._agent_state().astype(np.float32),
+            "goal_state": self._goal_state().astype(np.float32),
+        }
+        if self.obs_type == "state":
+            return obs
+        current = self._camera_obs()
+        cam, goal_cam = self.camera_cfg.name, GOAL_PREFIX + self.camera_cfg.name
+        obs["pixels"] = {cam: current[cam], goal_cam: self._goal_obs[goal_cam].copy()}
+        if self.obs_type == "rgbd":
+            obs[depth_obs_key(cam)] = current[depth_obs_key(cam)]
+            obs[depth_obs_key(goal_cam)] = self._goal_obs[depth_obs_key(goal_cam)].copy()
+        return obs
+
+    def render(self) -> np.ndarray:
+        """HxWx3 uint8 frame of the task camera (eval videos)."""
+        rgb, _ = self.renderer.render(self.data, self.camera_cfg.name, depth=False)
+        return rgb
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,236 @@
+"""LeRobot ``EnvConfig`` types for the Sawyer tasks (``--env.type=sawyer_reach``).
+
+Only dataclasses and LeRobot imports here: this module is imported by every LeRobot CLI through plugin
+discovery, so robosuite and MuJoCo are imported when an env is built, not before.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lerobot.configs import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.processor import PolicyProcessorPipeline
+from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
+
+from lerobot_indicator.envs.base import DEPTH_SUFFIX, OBS_TYPES
+from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.keys import GOAL_PREFIX, goal_key
+
+GYM_NAMESPACE = "lerobot_indicator"
+SAWYER_REACH_TASK = "SawyerReach-v0"
+
+
+@dataclass
+class SawyerGoalEnvConfig(EnvConfig):
+    """Shared base of the Sawyer goal tasks: obs type, camera, end-effector control, feature maps."""
+
+    task: str | None = None
+    fps: int = 20
+    episode_length: int = 25
+    obs_type: str = "state"
+    render_mode: str = "rgb_array"
+    # Draw the robot with its primitive collision shapes for the camera (~10x faster in software GL).
+    light_render: bool = True
+    camera: GoalCameraConfig = field(default_factory=GoalCameraConfig)
+    end_effector: EndEffectorConfig = field(default_factory=EndEffectorConfig)
+    state_dim: int = 3
+    action_dim: int = 3
+
+    def __post_init__(self):
+        if isinstance(self.camera, dict):  # make_env_config("sawyer_reach", camera={...})
+            self.camera = GoalCameraConfig(**self.camera)
+        if isinstance(self.end_effector, dict):
+            self.end_effector = EndEffectorConfig(**self.end_effector)
+        if self.obs_type not in OBS_TYPES:
+            raise ValueError(f"obs_type: unknown {self.obs_type!r}; expected one of {OBS_TYPES}")
+        if self.episode_length <= 0:
+            raise ValueError(f"episode_length must be > 0, got {self.episode_length}")
+        if self.fps <= 0:
+            raise ValueError(f"fps must be > 0, got {self.fps}")
+        if self.obs_type == "rgbd" and not self.camera.use_depth:
+            raise ValueError("camera.use_depth must be true for obs_type 'rgbd'")
+        self.features = {
+            ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(self.action_dim,)),
+            "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(self.state_dim,)),
+            "goal_state": PolicyFeature(type=FeatureType.STATE, shape=(self.state_dim,)),
+        }
+        self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE, "goal_state": goal_key(OBS_STATE)}
+        cam = self.camera.name
+        h, w = self.camera.height, self.camera.width
+        if self.obs_type in ("rgb", "rgbd"):
+            for name in (cam, GOAL_PREFIX + cam):
+                self.features[f"pixels/{name}"] = PolicyFeature(type=FeatureType.VISUAL, shape=(h, w, 3))
+                self.features_map[f"pixels/{name}"] = f"{OBS_IMAGES}.{name}"
+        if self.obs_type == "rgbd":
+            for key in self.depth_keys:
+                self.features[key] = PolicyFeature(type=FeatureType.VISUAL, shape=(h, w, 1))
+                self.features_map[key] = f"{OBS_IMAGES}.{key}"
+
+    @property
+    def depth_keys(self) -> list[str]:
+        """Env observation keys of the depth maps (``front_depth``, ``goal_front_depth``)."""
+        if self.obs_type != "rgbd":
+            return []
+        return [f"{self.camera.name}{DEPTH_SUFFIX}", f"{GOAL_PREFIX}{self.camera.name}{DEPTH_SUFFIX}"]
+
+    @property
+    def package_name(self) -> str:
+        return "lerobot_indicator.envs"
+
+    @property
+    def gym_id(self) -> str:
+        return f"{GYM_NAMESPACE}/{self.task}"
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {
+            "obs_type": self.obs_type,
+            "render_mode": self.render_mode,
+            "camera": self.camera,
+            "end_effector": self.end_effector,
+            "fps": self.fps,
+            "light_render": self.light_render,
+            "max_episode_steps": self.episode_length,
+        }
+
+    def get_env_processors(self):
+        from lerobot_indicator.envs.processors import DepthToImagesProcessorStep
+
+        steps = [DepthToImagesProcessorStep(depth_keys=self.depth_keys)] if self.depth_keys else []
+        return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
+
+
+@EnvConfig.register_subclass("sawyer_reach")
+@dataclass
+class SawyerReachEnvConfig(SawyerGoalEnvConfig):
+    """The paper's Visual Reacher (Sawyer): T=25, success within ``epsilon`` of the goal at the end."""
+
+    task: str | None = SAWYER_REACH_TASK
+    epsilon: float = 0.05
+
+    def __post_init__(self):
+        if self.epsilon <= 0:
+            raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
+        super().__post_init__()
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {**super().gym_kwargs, "epsilon": self.epsilon}
+
+
+ROPE_PUSH_TASK = "RopePush-v0"
+
+
+def _rope_camera() -> GoalCameraConfig:
+    from lerobot_indicator.envs.rope_push import rope_camera_config
+
+    return rope_camera_config()
+
+
+def _rope_end_effector() -> EndEffectorConfig:
+    from lerobot_indicator.envs.rope_push import rope_end_effector_config
+
+    return rope_end_effector_config()
+
+
+@EnvConfig.register_subclass("rope_push")
+@dataclass
+class RopePushEnvConfig(SawyerGoalEnvConfig):
+    """The paper's RopePush: 3 pushes (x1, y1, x2, y2); success when the 30 link-xy numbers are within
+    ``epsilon`` (plain L2, metres) of the goal's. ``end_effector`` bounds are the push region (x, y) and
+    the pusher's [pushing, lifted] height (z). ``cache_path``: start/goal pairs from
+    ``scripts/generate_rope_cache.py`` (generated on the fly when unset)."""
+
+    task: str | None = ROPE_PUSH_TASK
+    fps: int = 2
+    episode_length: int = 3
+    camera: GoalCameraConfig = field(default_factory=_rope_camera)
+    end_effector: EndEffectorConfig = field(default_factory=_rope_end_effector)
+    state_dim: int = 45
+    action_dim: int = 4
+    epsilon: float = 0.1
+    goal_pushes: int = 2
+    cache_path: str | None = None
+
+    def __post_init__(self):
+        if self.epsilon <= 0:
+            raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
+        if self.goal_pushes < 1:
+            raise ValueError(f"goal_pushes must be >= 1, got {self.goal_pushes}")
+        if self.state_dim != 45 or self.action_dim != 4:
+            raise ValueError(
+                f"rope_push has state_dim 45 and action_dim 4, got {self.state_dim}, {self.action_dim}"
+            )
+        super().__post_init__()
+        # Link xy (30) and its goal: the state-based compared pair under the goal-key rule.
+        xy = PolicyFeature(type=FeatureType.STATE, shape=(30,))
+        for key in ("rope_xy", GOAL_PREFIX + "rope_xy"):
+            self.features[key] = xy
+        self.features_map["rope_xy"] = f"{OBS_STR}.rope_xy"
+        self.features_map[GOAL_PREFIX + "rope_xy"] = goal_key(f"{OBS_STR}.rope_xy")
+
+    @property
+    def gym_kwargs(self) -> dict:
+        kwargs = {k: v for k, v in super().gym_kwargs.items() if k != "light_render"}
+        return {
+            **kwargs,
+            "epsilon": self.epsilon,
+            "goal_pushes": self.goal_pushes,
+            "cache_path": self.cache_path,
+        }
+
+
+__all__ = [
+    "EndEffectorConfig",
+    "EnvConfigFile",
+    "GoalCameraConfig",
+    "RopePushEnvConfig",
+    "SawyerGoalEnvConfig",
+    "SawyerReachEnvConfig",
+    "load_env_config",
+    "save_env_config",
+]
+
+
+# Derived in __post_init__, so never written to / read from a config file.
+_DERIVED_FIELDS = ("features", "features_map")
+
+
+@dataclass
+class EnvConfigFile:
+    """What an ``env_configs/*.yaml`` holds: the ``env`` section of a LeRobot pipeline config.
+
+    The same file works as ``lerobot-eval --config_path=...`` / ``lerobot-train --config_path=...``
+    (other sections come from the command line).
+    """
+
+    env: EnvConfig
+
+
+def load_env_config(path: str | Path) -> EnvConfig:
+    """Parse and validate an env config file; errors name the offending field."""
+    import draccus
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"env config file not found: {path}")
+    try:
+        return draccus.parse(EnvConfigFile, config_path=str(path), args=[]).env
+    except (draccus.utils.ParsingError, draccus.utils.DecodingError) as err:
+        cause = err.__cause__ or err.__context__
+        detail = f"{err}" + (f": {cause}" if cause is not None else "")
+        raise ValueError(f"{path}: invalid env config: {detail}") from err
+
+
+def save_env_config(cfg: EnvConfig, path: str | Path) -> None:
+    """Write ``cfg`` as a config file :func:`load_env_config` (and ``--config_path``) reads back."""
+    import draccus
+    import yaml
+
+    encoded = draccus.encode(cfg)
+    for key in _DERIVED_FIELDS:
+        encoded.pop(key, None)
+    encoded = {"type": cfg.type, **encoded}
+    Path(path).write_text(yaml.safe_dump({"env": encoded}, sort_keys=False))

@@ -1,0 +1,84 @@
+"""Fast offscreen RGB-D rendering: one GL pass gives both colour and depth.
+
+``mujoco.Renderer`` needs a second full render for depth and keeps shadows, reflections, skybox and
+multisampling (all expensive in software EGL). Observations are compared bit for bit by the indicator
+reward, and software GL is deterministic, so the same simulator state always renders the same bytes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+from lerobot_indicator.envs.models import RENDER_GROUP
+
+MM_PER_M = 1000.0
+UINT16_MAX = np.iinfo(np.uint16).max
+
+
+def metres_to_uint16_mm(depth_m: np.ndarray, depth_min_m: float, depth_max_m: float) -> np.ndarray:
+    """RealSense-style depth: uint16 millimetres, 0 where the depth is outside the sensor's range."""
+    valid = (depth_m >= depth_min_m) & (depth_m <= depth_max_m)
+    mm = np.rint(np.where(valid, depth_m, 0.0) * MM_PER_M)
+    return np.clip(mm, 0, UINT16_MAX).astype(np.uint16)
+
+
+class RGBDRenderer:
+    """Offscreen renderer for the fixed cameras of one model (one GL context per env instance)."""
+
+    def __init__(self, model, width: int, height: int, max_geom: int = 2000):
+        import mujoco
+
+        if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
+            model.vis.global_.offwidth = max(width, model.vis.global_.offwidth)
+            model.vis.global_.offheight = max(height, model.vis.global_.offheight)
+        self._mj = mujoco
+        self.model = model
+        self.width, self.height = width, height
+        self._gl = mujoco.GLContext(width, height)
+        self._gl.make_current()
+        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
+        self._scene = mujoco.MjvScene(model, maxgeom=max_geom)
+        for flag in ("mjRND_SHADOW", "mjRND_REFLECTION", "mjRND_SKYBOX", "mjRND_FOG", "mjRND_HAZE"):
+            self._scene.flags[getattr(mujoco.mjtRndFlag, flag)] = 0
+        self._opt = mujoco.MjvOption()
+        self._opt.geomgroup[:] = 0
+        self._opt.geomgroup[RENDER_GROUP] = 1
+        self._opt.sitegroup[:] = 0
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._rect = mujoco.MjrRect(0, 0, width, height)
+        self._rgb = np.empty((height, width, 3), dtype=np.uint8)
+        self._zbuf = np.empty((height, width), dtype=np.float32)
+        extent = model.stat.extent
+        self._near = model.vis.map.znear * extent
+        self._far = model.vis.map.zfar * extent
+
+    def render(self, data, camera: str, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """(RGB uint8 HxWx3, depth in metres float32 HxW or None) for ``camera`` at ``data``'s state."""
+        mj = self._mj
+        self._gl.make_current()
+        self._cam.fixedcamid = self.model.camera(camera).id
+        mj.mjv_updateScene(self.model, data, self._opt, None, self._cam, mj.mjtCatBit.mjCAT_ALL, self._scene)
+        mj.mjr_render(self._rect, self._scene, self._con)
+        mj.mjr_readPixels(self._rgb, self._zbuf if depth else None, self._rect, self._con)
+        rgb = np.flipud(self._rgb).copy()
+        if not depth:
+            return rgb, None
+        z = np.flipud(self._zbuf)
+        # OpenGL z-buffer -> metric distance along the optical axis (as mujoco.Renderer does).
+        depth_m = self._near / (1.0 - z * (1.0 - self._near / self._far))
+        return rgb, depth_m.astype(np.float32)
+
+    def close(self) -> None:
+        if self._gl is not None:
+            self._gl.make_current()
+            self._con.free()
+            self._gl.free()
+            self._gl = None
+
+    def __del__(self):
+        with contextlib.suppress(Exception):  # interpreter shutdown: GL may already be gone
+            self.close()

@@ -1,0 +1,191 @@
+"""Sawyer rope push (the paper's RopePush): push a 15-link rope into the configuration of a goal image.
+
+Action: one straight push (x1, y1, x2, y2) in [-1, 1]^4, mapped onto the table rectangle given by the
+x/y of ``end_effector.end_effector_bounds``; its z range is [pushing height, lifted height] of the
+gripper's bottom (see :mod:`lerobot_indicator.envs.rope_sim` for the push primitive). Horizon 3 pushes.
+
+Start: straight rope plus one random push; goal: ``goal_pushes`` (2) more random pushes, hidden from the
+policy. Pairs come from a cache file (``cache_path``, see :mod:`lerobot_indicator.envs.rope_cache`) or
+are generated on the fly. The pusher is parked outside the camera's view between pushes, so the camera
+and goal images show the table and the rope only; the goal image is rendered by putting the simulator
+in the goal configuration, rendering, and restoring the exact state (shared base).
+
+Observations (besides the shared camera keys): ``agent_pos`` = the 15 link centres xyz (45),
+``goal_state`` = the same in the goal configuration (45), ``rope_xy`` = link centres xy (30) and its goal
+``goal_rope_xy`` (30): the paper's 30-d goal, and the state-based compared pair under the goal-key rule
+(``observation.rope_xy`` -> ``observation.goal_rope_xy``).
+``info``: ``gt_achieved_goal`` / ``gt_desired_goal`` = link xy (30), ``gt_distance`` = their plain L2
+distance in metres over all 30 numbers (not divided by the link count; the authors' definition),
+``is_success`` = ``gt_distance <= epsilon`` (0.1, the paper's table).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from lerobot_indicator.envs.base import MujocoGoalEnv
+from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.envs.rope_cache import cache_params, generate_pair, load_cache
+from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model
+from lerobot_indicator.envs.rope_sim import PushConfig, RopeSim
+
+TASK_DESCRIPTION = "Push the rope into the configuration shown in the goal image."
+TABLE_TOP_Z = RopeGeometry().table_top_z
+
+
+def rope_camera_defaults() -> dict:
+    """Top-down camera over the push region (square view ~1 m wide at the D435's 58 degree fovy)."""
+    return {"name": "front", "pos": [0.0, 0.0, 1.7], "lookat": [0.0, 0.0, TABLE_TOP_Z]}
+
+
+def rope_camera_config(**overrides) -> GoalCameraConfig:
+    return GoalCameraConfig(**{**rope_camera_defaults(), **overrides})
+
+
+def rope_end_effector_config() -> EndEffectorConfig:
+    """Push region x, y in [-0.45, 0.45] m around the rope centre; pusher bottom 3 mm / 6 cm above the table.
+
+    The numbers equal :class:`PushConfig`'s defaults, so default caches and default envs match.
+    """
+    c = PushConfig()
+    return EndEffectorConfig(
+        end_effector_bounds={"min": [*c.region_low, c.push_z], "max": [*c.region_high, c.lift_z]}
+    )
+
+
+def push_config_for(end_effector: EndEffectorConfig, goal_pushes: int = 2) -> PushConfig:
+    """Push physics/sampling parameters of an env (also what a cache file must have been made with)."""
+    lo, hi = end_effector.low, end_effector.high
+    return PushConfig(
+        region_low=(lo[0], lo[1]),
+        region_high=(hi[0], hi[1]),
+        push_z=lo[2],
+        lift_z=hi[2],
+        goal_pushes=goal_pushes,
+    )
+
+
+class RopePushEnv(MujocoGoalEnv):
+    """See module docstring."""
+
+    task = "rope_push"
+    task_description = TASK_DESCRIPTION
+    state_dim = 45
+
+    def __init__(
+        self,
+        obs_type: str = "state",
+        camera: GoalCameraConfig | dict | None = None,
+        end_effector: EndEffectorConfig | dict | None = None,
+        fps: int = 2,
+        epsilon: float = 0.1,
+        goal_pushes: int = 2,
+        cache_path: str | None = None,
+        render_mode: str | None = "rgb_array",
+    ):
+        if epsilon <= 0:
+            raise ValueError(f"epsilon must be > 0, got {epsilon}")
+        if isinstance(camera, dict) or camera is None:
+            camera = rope_camera_config(**(camera or {}))
+        if isinstance(end_effector, dict):
+            end_effector = EndEffectorConfig(**end_effector)
+        end_effector = end_effector or rope_end_effector_config()
+        self.push_config = push_config_for(end_effector, goal_pushes)
+        self.epsilon = float(epsilon)
+        super().__init__(
+            obs_type=obs_type, camera=camera, end_effector=end_effector, fps=fps, render_mode=render_mode
+        )
+        self.sim = RopeSim(self.model, self.data, self.push_config)
+        self.sim.reset_straight()
+        n = self.push_config.geometry.n_links
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
+        xy = gym.spaces.Box(-np.inf, np.inf, shape=(2 * n,), dtype=np.float32)
+        self.observation_space = gym.spaces.Dict(
+            {**self.observation_space.spaces, "rope_xy": xy, "goal_rope_xy": xy}
+        )
+        self.cache = None
+        if cache_path is not None:
+            self.cache = load_cache(cache_path, expected=cache_params(self.push_config, self.model.nq))
+        self._goal_qpos = self.data.qpos.copy()
+        self._goal_links = self.sim.link_positions()
+        self._goal_actions = np.zeros((0, 4))
+        self._t = 0
+
+    def _build_model(self):
+        cam = self.camera_cfg
+        camera = (cam.name, tuple(cam.pos), tuple(cam.lookat), cam.fovy_deg)
+        return build_rope_model(self.push_config.geometry, camera, self.push_config.timestep)
+
+    # --- task hooks -----------------------------------------------------------------------------
+    def _agent_state(self) -> np.ndarray:
+        return self.sim.link_positions().reshape(-1)
+
+    def _goal_state(self) -> np.ndarray:
+        return self._goal_links.reshape(-1)
+
+    def _enter_goal_configuration(self) -> None:
+        self.sim.set_qpos(self._goal_qpos)
+
+    @property
+    def goal_push_actions(self) -> np.ndarray:
+        """The hidden pushes that made the goal from the start (scripted oracles and tests only)."""
+        return self._goal_actions.copy()
+
+    def scripted_action(self) -> np.ndarray:
+        """Data-collection expert (recorder's ``--policy=scripted``): the next hidden goal push, then no-op
+        pushes. It reads hidden ground truth, so it is for demonstrations only, never a policy input."""
+        if self._t < len(self._goal_actions):
+            return self._goal_actions[self._t].astype(np.float32)
+        return np.zeros(4, dtype=np.float32)
+
+    # --- gymnasium API --------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """``options``: ``cache_index`` picks a cached pair (needs ``cache_path``)."""
+        super().reset(seed=seed)
+        options = options or {}
+        if self.cache is not None:
+            n = len(self.cache["start_qpos"])
+            i = options.get("cache_index")
+            i = int(self.np_random.integers(n)) if i is None else int(i)
+            if not 0 <= i < n:
+                raise ValueError(f"reset option cache_index={i} out of range [0, {n})")
+            pair = {k: self.cache[k][i] for k in ("start_qpos", "goal_qpos", "goal_actions")}
+        elif options.get("cache_index") is not None:
+            raise ValueError("reset option cache_index needs an env made with cache_path")
+        else:
+            pair = generate_pair(self.sim, self.np_random, self.epsilon)
+        self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
+        self._t = 0
+        self.sim.set_qpos(self._goal_qpos)
+        self._goal_links = self.sim.link_positions()
+        if self.obs_type != "state":
+            self._goal_obs = self._camera_obs(prefix="goal_")
+        self.sim.set_qpos(pair["start_qpos"])
+        return self._get_obs(), self._info()
+
+    def step(self, action):
+        self.sim.push(np.asarray(action, dtype=np.float64).reshape(-1))
+        self._t += 1
+        info = self._info()
+        reward = 1.0 if info["is_success"] else -1.0  # ground-truth reward, for evaluation only
+        return self._get_obs(), reward, False, False, info
+
+    def _get_obs(self) -> dict[str, Any]:
+        obs = super()._get_obs()
+        obs["rope_xy"] = self.sim.link_positions()[:, :2].reshape(-1).astype(np.float32)
+        obs["goal_rope_xy"] = self._goal_links[:, :2].reshape(-1).astype(np.float32)
+        return obs
+
+    def _info(self) -> dict[str, Any]:
+        achieved = self.sim.link_positions()[:, :2].reshape(-1)
+        desired = self._goal_links[:, :2].reshape(-1)
+        distance = float(np.linalg.norm(achieved - desired))
+        return {
+            "gt_achieved_goal": achieved.astype(np.float32),
+            "gt_desired_goal": desired.astype(np.float32),
+            "gt_distance": np.float32(distance),
+            "is_success": bool(distance <= self.epsilon),
+        }

@@ -1,0 +1,232 @@
+"""Reproduce the paper's comparison (Figure 3 / supplementary ablations) on our tasks, with one command.
+
+Runs ``lerobot-indicator-train`` for every (task, method, seed), resumably (a finished run is skipped,
+an interrupted one continues with ``--resume=true``), then aggregates the runs' ``metrics.jsonl`` into
+``<out>/summary.json``, learning-curve plots and a markdown table.
+
+    python scripts/experiments.py --tasks='[reach_state]' --seeds='[0,1,2]' --out=docs/results/experiments
+    python scripts/experiments.py --tasks='[reach_state]' --plot_only=true ...   # aggregate only
+"""
+
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import draccus
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+BIN = Path(sys.executable).parent
+
+# Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
+# future step with probability 0.9 and keep the original goal otherwise (HER-style).
+METHODS: dict[str, list[str]] = {
+    "oracle": ["--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
+    "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
+    "indicator_balance": ["--policy.reward=indicator", "--policy.balance=true", "--policy.filter=false"],
+    "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
+    "indicator_balance_filter": ["--policy.reward=indicator", "--policy.balance=true", "--policy.filter=true"],
+}
+LABELS = {
+    "oracle": "Oracle",
+    "indicator": "Indicator",
+    "indicator_balance": "Indicator+Balance",
+    "indicator_filter": "Indicator+Filter",
+    "indicator_balance_filter": "Indicator+Balance+Filter",
+}
+RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
+
+
+@dataclass
+class TaskPreset:
+    env_args: list[str]
+    steps: int
+    updates_per_cycle: int
+    episodes_per_cycle: int
+    env_eval_freq: int
+    eval_episodes: int = 20
+
+
+TASKS: dict[str, TaskPreset] = {
+    "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 3000, 40, 2, 200),
+    "reach_rgbd": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 2, 400, 10),
+    "rope_state": TaskPreset(
+        ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
+        3000,
+        40,
+        8,
+        200,
+    ),
+    "rope_rgbd": TaskPreset(["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 8, 400, 10),
+}
+
+
+@dataclass
+class ExperimentConfig:
+    tasks: list[str] = field(default_factory=lambda: ["reach_state"])
+    methods: list[str] = field(default_factory=lambda: list(METHODS))
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    out: Path = Path("outputs/experiments")
+    # Overrides of the task presets' budget (None = preset).
+    steps: int | None = None
+    device: str = "cpu"
+    n_envs: int = 2
+    plot_only: bool = False
+    extra_args: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        for name, known, values in (("tasks", TASKS, self.tasks), ("methods", METHODS, self.methods)):
+            unknown = [v for v in values if v not in known]
+            if unknown:
+                raise ValueError(f"--{name}: unknown {unknown}; choose from {list(known)}")
+
+
+def run_dir(cfg: ExperimentConfig, task: str, method: str, seed: int) -> Path:
+    return cfg.out / "runs" / task / method / f"seed_{seed}"
+
+
+def read_rows(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
+    """Run (or resume) one training run; returns its wall time, 0 if it was already complete."""
+    preset, out = TASKS[task], run_dir(cfg, task, method, seed)
+    steps = cfg.steps or preset.steps
+    rows = read_rows(out / "metrics.jsonl")
+    if rows and rows[-1]["step"] >= steps:
+        return 0.0
+    cmd = [
+        str(BIN / "lerobot-indicator-train"),
+        *preset.env_args,
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        f"--policy.device={cfg.device}",
+        *METHODS[method],
+        f"--steps={steps}",
+        f"--online.n_envs={cfg.n_envs}",
+        f"--online.episodes_per_cycle={preset.episodes_per_cycle}",
+        f"--online.updates_per_cycle={preset.updates_per_cycle}",
+        f"--online.eval_episodes={preset.eval_episodes}",
+        f"--env_eval_freq={preset.env_eval_freq}",
+        f"--save_freq={steps}",
+        f"--seed={seed}",
+        f"--output_dir={out}",
+        *cfg.extra_args,
+    ]
+    if (out / "resume").exists() or (out / "resume.old").exists():
+        cmd.append("--resume=true")
+    print("$ " + shlex.join(cmd), flush=True)
+    t0 = time.perf_counter()
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    subprocess.run(cmd, check=True, env=env)
+    return time.perf_counter() - t0
+
+
+def aggregate(cfg: ExperimentConfig, task: str) -> dict:
+    """Mean and std over seeds of the eval metrics at each evaluation point, per method."""
+    result = {}
+    for method in cfg.methods:
+        runs = [read_rows(run_dir(cfg, task, method, s) / "metrics.jsonl") for s in cfg.seeds]
+        runs = [[r for r in rows if "eval_success_rate" in r] for rows in runs]
+        runs = [r for r in runs if r]
+        if not runs:
+            continue
+        n = min(len(r) for r in runs)
+        series = {}
+        for key in ("eval_success_rate", "eval_final_distance", "reward_accuracy", "false_negative_rate"):
+            if all(key in r[0] for r in runs):
+                values = np.array([[row[key] for row in r[:n]] for r in runs])
+                series[key] = {"mean": values.mean(0).tolist(), "std": values.std(0).tolist()}
+        final_success = [r[n - 1]["eval_success_rate"] for r in runs]
+        final_distance = [r[n - 1]["eval_final_distance"] for r in runs]
+        result[method] = {
+            "env_steps": [row["env_steps"] for row in runs[0][:n]],
+            "series": series,
+            "n_seeds": len(runs),
+            "final_env_steps": runs[0][n - 1]["env_steps"],
+            "final_success_rate": {"mean": float(np.mean(final_success)), "std": float(np.std(final_success))},
+            "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
+            "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
+        }
+    return result
+
+
+def plot(summary: dict, path: Path) -> None:
+    """One row per task: success rate, final distance, and the indicator reward's accuracy / FN rate."""
+    panels = (
+        ("eval_success_rate", "success rate"),
+        ("eval_final_distance", "final distance to goal"),
+        ("reward_accuracy", "indicator reward accuracy"),
+        ("false_negative_rate", "false-negative rate"),
+    )
+    fig, axes = plt.subplots(len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False)
+    for row, (task, methods) in zip(axes, summary.items(), strict=True):
+        for ax, (key, label) in zip(row, panels, strict=True):
+            for method, res in methods.items():
+                if key not in res["series"] or (key in ("reward_accuracy", "false_negative_rate") and method == "oracle"):
+                    continue
+                x = np.array(res["env_steps"])
+                mean, std = (np.array(res["series"][key][s]) for s in ("mean", "std"))
+                ax.plot(x, mean, label=LABELS[method])
+                ax.fill_between(x, mean - std, mean + std, alpha=0.2)
+            ax.set_title(f"{task}: {label}")
+            ax.set_xlabel("environment steps")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            if ax.lines:
+                ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def table(summary: dict) -> str:
+    lines = ["| task | method | seeds | env steps | success rate | final distance |", "|---|---|---|---|---|---|"]
+    for task, methods in summary.items():
+        for method, res in methods.items():
+            s, d = res["final_success_rate"], res["final_distance"]
+            lines.append(
+                f"| {task} | {LABELS[method]} | {res['n_seeds']} | {res['final_env_steps']} | "
+                f"{s['mean']:.2f} ± {s['std']:.2f} | {d['mean']:.3f} ± {d['std']:.3f} |"
+            )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    cfg = draccus.parse(ExperimentConfig)
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    wall = {}
+    if not cfg.plot_only:
+        # Seeds innermost-but-interleaved: every method gets seed 0 before any gets seed 1, so a partial
+        # run still compares all methods.
+        for task in cfg.tasks:
+            for seed in cfg.seeds:
+                for method in cfg.methods:
+                    wall[f"{task}/{method}/{seed}"] = launch(cfg, task, method, seed)
+    summary = {task: aggregate(cfg, task) for task in cfg.tasks}
+    meta = {
+        "command": shlex.join([sys.executable, *sys.argv]),
+        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} CPUs",
+        "device": cfg.device,
+        "launch_wall_s": wall,
+    }
+    (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
+    plot(summary, cfg.out / "comparison.png")
+    (cfg.out / "table.md").write_text(table(summary) + "\n")
+    print(table(summary))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Recording goal-conditioned LeRobotDatasets from the sim tasks (see docs/dataset_format.md)."""

@@ -1,0 +1,435 @@
+"""Recorder: tiny episodes of every task, reloaded offline and checked feature by feature."""
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from draccus.utils import ParsingError
+from huggingface_hub import constants as hf_constants
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_indicator.data import action_sources, recorder
+from lerobot_indicator.data.checkpoint import JOURNAL_DIR, has_checkpoint, restore_checkpoint
+from lerobot_indicator.data.recorder import RecordConfig, make_single_env, record
+from lerobot_indicator.envs import RopePushEnvConfig, SawyerReachEnvConfig
+from lerobot_indicator.keys import goal_key
+
+REPO = Path(__file__).resolve().parents[1]
+T = 3  # steps per tiny episode
+F = T + 1  # frames per episode: o_0..o_T (the last frame holds only the final observation)
+TASK_CONFIGS = {"sawyer_reach": SawyerReachEnvConfig, "rope_push": RopePushEnvConfig}
+# Task-specific features beyond the shared ones (goal-key rule: observation.x -> observation.goal_x).
+EXTRA_FEATURES = {
+    "sawyer_reach": {},
+    "rope_push": {"observation.rope_xy": ("float32", (30,)), "observation.goal_rope_xy": ("float32", (30,))},
+}
+GT_DIM = {"sawyer_reach": 3, "rope_push": 30}
+POLICY = {"sawyer_reach": "noisy_scripted", "rope_push": "scripted"}
+
+
+@pytest.fixture(autouse=True)
+def _egl(monkeypatch):
+    monkeypatch.setenv("MUJOCO_GL", os.environ.get("MUJOCO_GL", "egl"))
+
+
+def env_cfg(task: str = "sawyer_reach", obs_type: str = "rgbd"):
+    return TASK_CONFIGS[task](obs_type=obs_type, episode_length=T)
+
+
+def record_tiny(root: Path, obs_type="rgbd", task="sawyer_reach", **kwargs) -> LeRobotDataset:
+    cfg = RecordConfig(
+        env=env_cfg(task, obs_type),
+        repo_id=f"test/{task}_{obs_type}",
+        root=root,
+        num_episodes=kwargs.pop("num_episodes", 2),
+        checkpoint_every_s=0,
+        **kwargs,
+    )
+    return record(cfg)
+
+
+def load_offline(root: Path, repo_id: str, monkeypatch, **kwargs) -> LeRobotDataset:
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setattr(hf_constants, "HF_HUB_OFFLINE", True)
+    return LeRobotDataset(repo_id, root=root, video_backend="pyav", **kwargs)
+
+
+def tree_digest(root: Path) -> dict[str, str]:
+    return {
+        p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.mark.parametrize("task", sorted(TASK_CONFIGS))
+@pytest.mark.parametrize("obs_type", ["state", "rgbd"])
+def test_recorded_features_reload_offline(tmp_path, monkeypatch, task, obs_type):
+    record_tiny(tmp_path / "ds", obs_type, task, policy=POLICY[task])
+    ds = load_offline(tmp_path / "ds", f"test/{task}_{obs_type}", monkeypatch)
+    assert (ds.num_episodes, len(ds)) == (2, 2 * F)
+    cfg = env_cfg(task, obs_type)
+    cam, gt_dim = cfg.camera, GT_DIM[task]
+    expected = {
+        "observation.state": ("float32", (cfg.state_dim,)),
+        "observation.goal_state": ("float32", (cfg.state_dim,)),
+        "observation.gt_achieved_goal": ("float32", (gt_dim,)),
+        "observation.gt_desired_goal": ("float32", (gt_dim,)),
+        "observation.gt_distance": ("float32", (1,)),
+        "action": ("float32", (cfg.action_dim,)),
+        "next.reward": ("float32", (1,)),
+        "next.done": ("bool", (1,)),
+        **EXTRA_FEATURES[task],
+    }
+    if obs_type == "rgbd":
+        for name in ("front", "goal_front"):
+            expected[f"observation.images.{name}"] = ("image", (cam.height, cam.width, 3))
+            expected[f"observation.images.{name}_depth"] = ("image", (cam.height, cam.width, 1))
+    user_features = {
+        k: v
+        for k, v in ds.meta.features.items()
+        if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")
+    }
+    assert {k: (v["dtype"], tuple(v["shape"])) for k, v in user_features.items()} == expected
+    for key in ("observation.images.front_depth", "observation.images.goal_front_depth"):
+        if obs_type == "rgbd":
+            assert ds.meta.features[key]["info"]["is_depth_map"] is True
+            assert key in ds.meta.depth_keys
+
+    items = [ds[i] for i in range(len(ds))]
+    compared = recorder.default_reward_keys(ds.meta.features)
+    assert sorted(compared) == sorted(
+        ["observation.images.front", "observation.images.front_depth"]
+        if obs_type == "rgbd"
+        else [k for k in ("observation.state", "observation.rope_xy") if k in ds.meta.features]
+    )
+    for i, item in enumerate(items):
+        t = item["frame_index"].item()
+        assert item["next.done"].item() is (t >= T - 1)
+        if t < T:  # R+ iff o_{t+1} equals the goal on every compared key, bit for bit
+            hit = all(torch.equal(items[i + 1][k], item[goal_key(k)]) for k in compared)
+            assert item["next.reward"].item() == (1.0 if hit else -1.0)
+        else:  # the final-observation frame: no transition
+            assert item["next.reward"].item() == 0.0 and not item["action"].any()
+        assert torch.all(item["action"].abs() <= 1.0)
+        dist = torch.linalg.norm(item["observation.gt_achieved_goal"] - item["observation.gt_desired_goal"])
+        assert item["observation.gt_distance"].item() == pytest.approx(dist.item(), abs=1e-5)
+        assert item["task"] == ds.meta.tasks.index[0] and item["task"]
+        if obs_type == "rgbd":
+            rgb, depth = item["observation.images.front"], item["observation.images.front_depth"]
+            assert rgb.dtype == torch.float32 and rgb.shape == (3, cam.height, cam.width)
+            assert rgb.min() >= 0.0 and rgb.max() <= 1.0 and rgb.std() > 0
+            assert depth.dtype == torch.float32 and depth.shape == (1, cam.height, cam.width)
+            assert depth.min() >= 0.0 and depth.max() <= cam.depth_max_m * 1000.0  # millimetres
+        if task == "rope_push":
+            assert torch.equal(item["observation.rope_xy"], item["observation.gt_achieved_goal"])
+            assert torch.equal(item["observation.goal_rope_xy"], item["observation.gt_desired_goal"])
+            continue
+        assert torch.equal(item["observation.goal_state"], item["observation.gt_desired_goal"])
+        assert torch.equal(item["observation.state"], item["observation.gt_achieved_goal"])
+        if t < T - 1:  # the scripted expert moves the gripper toward the goal
+            nxt = items[i + 1]
+            assert nxt["observation.gt_distance"] < item["observation.gt_distance"]
+            if obs_type == "rgbd":
+                assert not torch.equal(nxt["observation.images.front"], item["observation.images.front"])
+
+
+def test_goal_and_depth_match_the_env_bit_for_bit(tmp_path, monkeypatch):
+    """Lossless storage: goal images equal the rendered goal; depth round-trips with 0 mm error."""
+    record_tiny(tmp_path / "ds", "rgbd", policy="random", seed=7)
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_rgbd", monkeypatch)
+    vec = make_single_env(env_cfg())
+    try:
+        for episode in range(2):
+            obs, _ = vec.reset(seed=7 + episode)  # the recorder seeds episode e with seed + e
+            first = ds[episode * F]
+            assert first["episode_index"].item() == episode
+            for name, env_img in obs["pixels"].items():
+                # What lerobot-eval's preprocess_observation makes of the env image, bit for bit.
+                eval_batch = torch.from_numpy(env_img[0]).permute(2, 0, 1).to(torch.float32) / 255
+                assert torch.equal(first[f"observation.images.{name}"], eval_batch)
+            for name in ("front_depth", "goal_front_depth"):
+                stored_mm = first[f"observation.images.{name}"][0].numpy()
+                np.testing.assert_array_equal(stored_mm, obs[name][0, ..., 0].astype(np.float32))
+    finally:
+        vec.close()
+    goal = ds[0]["observation.images.goal_front"]
+    assert all(torch.equal(ds[t]["observation.images.goal_front"], goal) for t in range(F))
+
+
+def test_video_depth_round_trip_within_documented_tolerance(tmp_path, monkeypatch):
+    """MP4 storage: RGB and depth are lossy (docs/dataset_format.md gives the tolerance)."""
+    record_tiny(tmp_path / "ds", "rgbd", policy="random", use_videos=True, num_episodes=1)
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_rgbd", monkeypatch)
+    assert ds.meta.features["observation.images.front_depth"]["dtype"] == "video"
+    vec = make_single_env(env_cfg())
+    try:
+        obs, _ = vec.reset(seed=0)
+    finally:
+        vec.close()
+    true_mm = obs["front_depth"][0, ..., 0].astype(np.float32)
+    stored_mm = ds[0]["observation.images.front_depth"][0].numpy()
+    valid = true_mm > 0
+    assert valid.mean() > 0.5
+    # 12-bit log quantisation (LeRobot defaults) + HEVC: <= 2 mm at table distances (measured: 1 mm).
+    assert np.abs(stored_mm[valid] - true_mm[valid]).max() <= 2.0
+    assert np.all(stored_mm[~valid] <= 10.0)  # invalid (0) readings come back as the quantiser's 10 mm floor
+    rgb_err = np.abs(
+        ds[0]["observation.images.front"].permute(1, 2, 0).numpy() * 255 - obs["pixels"]["front"][0]
+    )
+    assert rgb_err.mean() <= 3.0  # lossy: never bit-exact in general, close on average
+
+
+def test_indicator_reward_marks_an_exact_goal_hit(tmp_path, monkeypatch):
+    """R+ exactly when o_{t+1} equals the goal bit for bit; a 20 um drift is already R-.
+
+    The env starts at its goal; its first step is made to report the start observation again (a
+    perfect "stay"), later steps are real (a zero action lets the arm drift by micrometres).
+    """
+    real_make = recorder.make_single_env
+
+    def env_starting_at_goal(cfg):
+        vec = real_make(cfg)
+        env = vec.envs[0]  # the recorder steps the single env itself (EpisodeStepper)
+        real_reset, real_step, first = env.reset, env.step, {}
+
+        def reset(seed=None, options=None):
+            point = np.random.default_rng(seed).uniform(cfg.end_effector.low, cfg.end_effector.high).tolist()
+            first["out"], first["t"] = (
+                real_reset(seed=seed, options={"goal_pos": point, "start_pos": point}),
+                0,
+            )
+            return first["out"]
+
+        def step(action):
+            obs, *rest = real_step(action)
+            first["t"] += 1
+            return (first["out"][0] if first["t"] == 1 else obs, *rest)
+
+        env.reset, env.step = reset, step
+        return vec
+
+    class ZeroAction:
+        def reset(self):
+            pass
+
+        def __call__(self, observation, info):
+            return np.zeros((1, 3), np.float32)
+
+    monkeypatch.setattr(recorder, "make_single_env", env_starting_at_goal)
+    monkeypatch.setattr(recorder, "make_action_source", lambda *a, **k: ZeroAction())
+    record_tiny(tmp_path / "ds", "rgbd", num_episodes=1)
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_rgbd", monkeypatch)
+    goal = ds[0]["observation.images.goal_front"]
+    assert torch.equal(ds[0]["observation.images.front"], goal)  # started at the goal, bit for bit
+    rewards = [ds[t]["next.reward"].item() for t in range(T)]
+    for t in range(T):  # frame t's reward is about o_{t+1}, the next frame's observation
+        assert rewards[t] == (1.0 if torch.equal(ds[t + 1]["observation.images.front"], goal) else -1.0)
+    assert rewards[0] == 1.0 and rewards[-1] == -1.0
+
+
+def test_interrupt_keeps_saved_episodes(tmp_path, monkeypatch):
+    """An exception (or Ctrl-C) mid-episode keeps every saved episode readable; the partial one is dropped."""
+    real = action_sources.make_action_source
+    calls = {"n": 0}
+
+    def interrupting(*args, **kwargs):
+        source = real(*args, **kwargs)
+
+        def act(observation, info):
+            calls["n"] += 1
+            if calls["n"] == T + 2:  # second step of the second episode
+                raise KeyboardInterrupt
+            return source(observation, info)
+
+        act.reset = source.reset
+        return act
+
+    monkeypatch.setattr(recorder, "make_action_source", interrupting)
+    with pytest.raises(KeyboardInterrupt):
+        record_tiny(tmp_path / "ds", "rgbd", num_episodes=3, policy="random")
+    assert not (tmp_path / "ds" / JOURNAL_DIR).exists()
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_rgbd", monkeypatch)
+    assert (ds.num_episodes, len(ds)) == (1, F)
+    assert ds[T - 1]["next.done"].item() and ds[T]["next.done"].item()
+    assert not list((tmp_path / "ds" / "images").rglob("*.png"))  # no leftovers of the dropped episode
+
+
+def test_killed_recording_keeps_checkpointed_episodes_and_resumes(tmp_path, monkeypatch):
+    root = tmp_path / "ds"
+    cmd = [
+        sys.executable,
+        str(REPO / "scripts" / "record.py"),
+        "--env.type=sawyer_reach",
+        "--env.obs_type=state",
+        f"--env.episode_length={T}",
+        "--policy=random",
+        "--num_episodes=10000",
+        "--repo_id=test/killed",
+        f"--root={root}",
+        "--checkpoint_every_s=0",
+    ]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    journal = root / JOURNAL_DIR / "checkpoint.json"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            if journal.exists() and json.loads(journal.read_text())["total_episodes"] >= 2:
+                break
+            assert proc.poll() is None, "recorder exited early"
+            time.sleep(0.2)
+        else:
+            pytest.fail("recorder never checkpointed 2 episodes")
+        time.sleep(0.3)  # let it get into the middle of another episode
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+
+    assert has_checkpoint(root)
+    kept = restore_checkpoint(root)
+    assert kept >= 2
+    ds = load_offline(root, "test/killed", monkeypatch)
+    assert ds.num_episodes == kept and len(ds) == kept * F
+    before = [ds[i]["action"] for i in range(len(ds))]
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "0")
+    cfg = RecordConfig(
+        env=env_cfg(obs_type="state"),
+        repo_id="test/killed",
+        root=root,
+        policy="random",
+        num_episodes=1,
+        resume=True,
+        checkpoint_every_s=0,
+    )
+    record(cfg)
+    ds = load_offline(root, "test/killed", monkeypatch)
+    assert ds.num_episodes == kept + 1 and len(ds) == (kept + 1) * F
+    assert all(torch.equal(ds[i]["action"], a) for i, a in enumerate(before))
+    assert sorted({int(e) for e in ds.hf_dataset["episode_index"]}) == list(range(kept + 1))
+    assert not has_checkpoint(root)
+
+
+def test_resume_appends_with_fresh_seeds(tmp_path, monkeypatch):
+    record_tiny(tmp_path / "ds", "state", policy="scripted")
+    record_tiny(tmp_path / "ds", "state", policy="scripted", resume=True, num_episodes=1)
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_state", monkeypatch)
+    assert ds.num_episodes == 3
+    goals = {tuple(ds[e * F]["observation.goal_state"].tolist()) for e in range(3)}
+    assert len(goals) == 3  # episode e is seeded with seed + e, resumed ones included
+
+
+def _cli(monkeypatch, *args: str):
+    """Run scripts/record.py's entry point in-process (same parser, no interpreter start-up)."""
+    monkeypatch.setattr(sys, "argv", ["record.py", *args])
+    return recorder.main()
+
+
+def test_cli_rejects_unknown_env_type(tmp_path, monkeypatch, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        _cli(monkeypatch, "--env.type=no_such_task", "--repo_id=test/x", f"--root={tmp_path / 'ds'}")
+    assert exit_info.value.code != 0
+    assert "no_such_task" in capsys.readouterr().err
+    assert not (tmp_path / "ds").exists()
+
+
+@pytest.mark.parametrize("num_episodes", [0, -3])
+def test_rejects_non_positive_num_episodes(tmp_path, monkeypatch, num_episodes):
+    with pytest.raises(ValueError, match="num_episodes must be > 0"):
+        RecordConfig(env=env_cfg(), repo_id="test/x", num_episodes=num_episodes)
+    with pytest.raises(ParsingError) as err:
+        _cli(
+            monkeypatch,
+            "--env.type=sawyer_reach",
+            "--repo_id=test/x",
+            f"--root={tmp_path / 'ds'}",
+            f"--num_episodes={num_episodes}",
+        )
+    assert "num_episodes must be > 0" in str(err.value.__cause__)
+    assert not (tmp_path / "ds").exists()
+
+
+def test_existing_dataset_without_resume_is_not_touched(tmp_path, monkeypatch):
+    root = tmp_path / "ds"
+    record_tiny(root, "state", num_episodes=1)
+    digest = tree_digest(root)
+    with pytest.raises(FileExistsError, match="--resume=true"):
+        record_tiny(root, "state", num_episodes=1)
+    assert tree_digest(root) == digest
+    with pytest.raises(FileExistsError, match="already exists"):
+        _cli(monkeypatch, "--env.type=sawyer_reach", "--repo_id=test/sawyer_reach_state", f"--root={root}")
+    assert tree_digest(root) == digest
+
+
+def test_resume_without_dataset_is_an_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no dataset"):
+        record_tiny(tmp_path / "missing", "state", resume=True, num_episodes=1)
+
+
+def test_resume_with_other_features_is_an_error(tmp_path):
+    root = tmp_path / "ds"
+    record_tiny(root, "state", num_episodes=1)
+    digest = tree_digest(root)
+    cfg = RecordConfig(
+        env=env_cfg(obs_type="rgbd"),
+        repo_id="test/sawyer_reach_state",
+        root=root,
+        num_episodes=1,
+        resume=True,
+    )
+    with pytest.raises(ValueError, match="other features"):
+        record(cfg)
+    assert tree_digest(root) == digest
+
+
+def test_records_with_a_pretrained_policy_checkpoint(tmp_path, monkeypatch):
+    """``--policy=<dir>``: a saved indicator_ddpg policy drives the env, fed as lerobot-eval feeds it."""
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+    from lerobot.policies.factory import make_policy, make_pre_post_processors
+
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+
+    record_tiny(tmp_path / "seed_ds", "state", num_episodes=1)
+    meta = LeRobotDatasetMetadata("test/sawyer_reach_state", root=tmp_path / "seed_ds")
+    policy_cfg = IndicatorDDPGConfig(
+        observation_keys=["observation.state"], horizon=T, hidden_dims=[16], device="cpu"
+    )
+    policy = make_policy(policy_cfg, ds_meta=meta)
+    pre, post = make_pre_post_processors(policy_cfg, dataset_stats=meta.stats)
+    ckpt = tmp_path / "pretrained_model"
+    policy.save_pretrained(ckpt)
+    pre.save_pretrained(ckpt)
+    post.save_pretrained(ckpt)
+
+    record_tiny(tmp_path / "ds", "state", policy=str(ckpt), num_episodes=1)
+    ds = load_offline(tmp_path / "ds", "test/sawyer_reach_state", monkeypatch)
+    policy.eval()
+    for t in range(T):
+        item = ds[t]
+        batch = pre(
+            {k: item[k][None] for k in ("observation.state", "observation.goal_state")}
+            | {"task": [item["task"]]}
+        )
+        with torch.no_grad():
+            expected = post(policy.select_action(batch))[0]
+        assert torch.allclose(item["action"], expected, atol=1e-6)
+
+
+def test_rope_scripted_expert_reaches_the_goal_bit_for_bit(tmp_path, monkeypatch):
+    """rope_push's ``scripted_action()`` replays the hidden goal pushes: the recorded images hit the goal
+    image exactly, so the indicator reward turns R+ (and stays R+ under the final no-op push)."""
+    record_tiny(tmp_path / "ds", "rgbd", "rope_push", policy="scripted", num_episodes=1)
+    ds = load_offline(tmp_path / "ds", "test/rope_push_rgbd", monkeypatch)
+    assert [ds[t]["next.reward"].item() for t in range(T)] == [-1.0, 1.0, 1.0]
+    last = ds[T]  # o_T
+    assert torch.equal(last["observation.images.front"], last["observation.images.goal_front"])
+    assert torch.equal(last["observation.images.front_depth"], last["observation.images.goal_front_depth"])
+    assert last["observation.gt_distance"].item() == 0.0

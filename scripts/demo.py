@@ -24,13 +24,13 @@ TRAIN_ARGS = [
     "--policy.type=indicator_ddpg",
     "--policy.device=cpu",
     "--policy.push_to_hub=false",
-    "--steps=3000",
+    "--steps=2400",
     "--online.n_envs=2",
-    "--online.episodes_per_cycle=2",
+    "--online.episodes_per_cycle=4",
     "--online.updates_per_cycle=40",
     "--online.eval_episodes=20",
-    "--env_eval_freq=600",
-    "--save_freq=3000",
+    "--env_eval_freq=400",
+    "--save_freq=2400",
     "--seed=1",
 ]
 
@@ -45,6 +45,7 @@ def main() -> int:
     stamp = dt.datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     parser.add_argument("--output_dir", type=Path, default=Path("outputs/demo") / stamp)
     parser.add_argument("--eval_episodes", type=int, default=50)
+    parser.add_argument("--min_success", type=float, default=80.0, help="exit non-zero below this pc_success")
     args = parser.parse_args()
     out: Path = args.output_dir
     train_dir, eval_dir = out / "train", out / "eval"
@@ -73,7 +74,6 @@ def main() -> int:
     summary = {
         "pc_success": info["pc_success"],
         "n_episodes": info.get("n_episodes", args.eval_episodes),
-        "mean_final_distance_m": -info["avg_sum_reward"],
         "train_wall_s": round(train_s, 1),
         "eval_wall_s": round(eval_s, 1),
         "checkpoint": str(checkpoint),
@@ -81,13 +81,23 @@ def main() -> int:
         "learning_curve": str((train_dir / "learning_curve.png").resolve()),
         "metrics": str((train_dir / "metrics.jsonl").resolve()),
     }
-    (out / "demo_summary.json").write_text(json.dumps(summary, indent=2))
     print("\n==== demo: indicator_ddpg on state-based Sawyer reach ====")
     print(f"success rate (lerobot-eval, {summary['n_episodes']} episodes): {summary['pc_success']:.1f}%")
-    print(f"mean final distance to goal: {summary['mean_final_distance_m']:.3f} m")
+    metrics = [json.loads(line) for line in (train_dir / "metrics.jsonl").read_text().splitlines()]
+    last = metrics[-1]
+    summary["trainer_eval"] = {k: last[k] for k in ("env_steps", "eval_success_rate", "eval_final_distance")}
+    print(
+        f"trainer's own eval (final step, {last['env_steps']} env steps): success "
+        f"{last['eval_success_rate']:.2f}, mean final distance {last['eval_final_distance']:.3f} m"
+    )
     print(f"training {train_s:.0f} s, evaluation {eval_s:.0f} s")
     for key in ("checkpoint", "eval_videos", "learning_curve", "metrics"):
         print(f"{key:>15}: {summary[key]}")
+    summary["command"] = shlex.join([sys.executable, *sys.argv])
+    (out / "demo_summary.json").write_text(json.dumps(summary, indent=2))
+    if summary["pc_success"] < args.min_success:
+        print(f"FAILED: success {summary['pc_success']:.1f}% < {args.min_success}%", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -34,7 +34,11 @@ METHODS: dict[str, list[str]] = {
     "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
     "indicator_balance": ["--policy.reward=indicator", "--policy.balance=true", "--policy.filter=false"],
     "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
-    "indicator_balance_filter": ["--policy.reward=indicator", "--policy.balance=true", "--policy.filter=true"],
+    "indicator_balance_filter": [
+        "--policy.reward=indicator",
+        "--policy.balance=true",
+        "--policy.filter=true",
+    ],
 }
 LABELS = {
     "oracle": "Oracle",
@@ -58,7 +62,9 @@ class TaskPreset:
 
 TASKS: dict[str, TaskPreset] = {
     "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 3000, 40, 2, 200),
-    "reach_rgbd": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 2, 400, 10),
+    "reach_rgbd": TaskPreset(
+        ["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 2, 400, 10
+    ),
     "rope_state": TaskPreset(
         ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
         3000,
@@ -156,7 +162,10 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
             "series": series,
             "n_seeds": len(runs),
             "final_env_steps": runs[0][n - 1]["env_steps"],
-            "final_success_rate": {"mean": float(np.mean(final_success)), "std": float(np.std(final_success))},
+            "final_success_rate": {
+                "mean": float(np.mean(final_success)),
+                "std": float(np.std(final_success)),
+            },
             "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
             "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
         }
@@ -171,11 +180,15 @@ def plot(summary: dict, path: Path) -> None:
         ("reward_accuracy", "indicator reward accuracy"),
         ("false_negative_rate", "false-negative rate"),
     )
-    fig, axes = plt.subplots(len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False
+    )
     for row, (task, methods) in zip(axes, summary.items(), strict=True):
         for ax, (key, label) in zip(row, panels, strict=True):
             for method, res in methods.items():
-                if key not in res["series"] or (key in ("reward_accuracy", "false_negative_rate") and method == "oracle"):
+                if key not in res["series"] or (
+                    key in ("reward_accuracy", "false_negative_rate") and method == "oracle"
+                ):
                     continue
                 x = np.array(res["env_steps"])
                 mean, std = (np.array(res["series"][key][s]) for s in ("mean", "std"))
@@ -193,7 +206,10 @@ def plot(summary: dict, path: Path) -> None:
 
 
 def table(summary: dict) -> str:
-    lines = ["| task | method | seeds | env steps | success rate | final distance |", "|---|---|---|---|---|---|"]
+    lines = [
+        "| task | method | seeds | env steps | success rate | final distance |",
+        "|---|---|---|---|---|---|",
+    ]
     for task, methods in summary.items():
         for method, res in methods.items():
             s, d = res["final_success_rate"], res["final_distance"]

@@ -37,9 +37,10 @@ def git_blob_oid(content: bytes) -> str:
 
 
 class HubError(Exception):
-    def __init__(self, status: int, message: str, error_code: str | None = None):
+    def __init__(self, status: int, message: str, error_code: str | None = None, extra: dict | None = None):
         super().__init__(message)
         self.status, self.message, self.error_code = status, message, error_code
+        self.extra = extra or {}  # more JSON fields of the error body, as the real Hub sends them
 
 
 @dataclass
@@ -171,7 +172,8 @@ class LocalHub:
         url = f"{self.url}/{URL_PREFIX[repo_type]}{repo_id}"
         with self._lock:
             if (repo_type, repo_id) in self.repos:
-                raise HubError(409, "You already created this repo", None)
+                # The real Hub's 409 carries the repo url; huggingface_hub's create_repo(exist_ok=True) reads it.
+                raise HubError(409, "You already created this repo", None, {"url": url})
             repo = Repo(repo_type, repo_id, private=body.get("visibility") == "private")
             self.repos[(repo_type, repo_id)] = repo
             gitattributes = self._write_blob(b"*.safetensors filter=lfs diff=lfs merge=lfs -text\n")
@@ -358,7 +360,7 @@ def _make_handler(hub: LocalHub) -> type[BaseHTTPRequestHandler]:
                 headers = {"X-Error-Message": err.message}
                 if err.error_code:
                     headers["X-Error-Code"] = err.error_code
-                self._send(err.status, {"error": err.message}, headers)
+                self._send(err.status, {"error": err.message, **err.extra}, headers)
 
         def _route(self, parts: list[str], query: dict, body: bytes) -> None:
             method = self.command

@@ -98,3 +98,15 @@ def test_packing_is_lossless_and_compact():
     assert buf.obs["observation.state"].dtype == np.float32
     assert np.array_equal(buf.obs["observation.state"][1], obs2["observation.state"])
     assert np.array_equal(buf.obs["observation.state"][0], obs["observation.state"])
+
+
+def test_observation_stats_per_dimension_and_per_channel():
+    buf = EpisodeReplayBuffer(capacity_transitions=4 * T, horizon=T)
+    for e in range(3):
+        buf.add_episode(*_episode(e))
+    stats = buf.observation_stats()
+    state = np.concatenate([_episode(e)[0]["observation.state"] for e in range(3)])
+    np.testing.assert_allclose(stats["observation.state"]["mean"], state.mean(0), rtol=1e-6)
+    np.testing.assert_allclose(stats["observation.state"]["std"], state.std(0), rtol=1e-6)
+    assert stats["observation.images.front"]["mean"].shape == (3, 1, 1)
+    assert "observation.goal_state" not in stats  # goals are normalised with their observation's stats

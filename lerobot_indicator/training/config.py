@@ -2,7 +2,6 @@
 ``--dataset.*``, ``--output_dir``, ``--seed``, ``--steps``, ``--env_eval_freq``, ``--save_freq``,
 ``--resume``) plus the online loop's own knobs under ``--online.*`` and ``--record.*``."""
 
-
 import datetime as dt
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +24,7 @@ class OnlineConfig:
     n_envs: int = 2
     use_async_envs: bool = True
     # Episodes collected per cycle (rounded up to a multiple of n_envs) and gradient steps per cycle.
-    episodes_per_cycle: int = 2
+    episodes_per_cycle: int = 4
     updates_per_cycle: int = 40
     # Batch size; None = the paper's (256 for state inputs, 128 for images).
     batch_size: int | None = None

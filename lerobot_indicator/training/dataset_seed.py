@@ -65,7 +65,9 @@ def seed_buffer(buffer: EpisodeReplayBuffer, cfg: DatasetConfig, keys: list[str]
     """Add every episode of the dataset to ``buffer``; returns the number of episodes added."""
     dataset = load_dataset(cfg)
     n = 0
-    for episode in tqdm(dataset_episodes(dataset, keys, buffer.horizon), desc="seeding buffer", unit="episode"):
+    for episode in tqdm(
+        dataset_episodes(dataset, keys, buffer.horizon), desc="seeding buffer", unit="episode"
+    ):
         buffer.add_episode(*episode)
         n += 1
     logging.info("seeded the replay buffer with %d episodes of %s", n, cfg.repo_id)

@@ -11,7 +11,6 @@ seeded from ``(seed, cycle)``). LeRobot-layout checkpoints (``checkpoints/<step>
 loadable by ``lerobot-eval --policy.path``) are written every ``save_freq`` steps and at the end.
 """
 
-
 import json
 import logging
 import math
@@ -64,13 +63,22 @@ def cycle_seed(seed: int, cycle: int) -> int:
     return (seed * 1_000_003 + cycle) % (2**63)
 
 
-def to_transition_batch(sample: dict, keys: list[str], device: torch.device) -> dict[str, torch.Tensor]:
-    """Replay-buffer sample -> the learning core's transition batch (``indicator_core`` docstring)."""
+def to_transition_batch(
+    sample: dict, keys: list[str], horizon: int, device: torch.device
+) -> dict[str, torch.Tensor]:
+    """Replay-buffer sample -> the learning core's transition batch (``indicator_core`` docstring).
+
+    ``future.count`` = |{t+2..T}| lets the unbalanced (HER-style) mode pick o_{t+1} with the right
+    probability, so its future goal is uniform over {t+1..T}."""
 
     def t(x: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(x)).to(device)
 
-    batch = {core.ACTION: t(sample["action"]), core.HAS_FUTURE: t(sample["has_future"])}
+    batch = {
+        core.ACTION: t(sample["action"]),
+        core.HAS_FUTURE: t(sample["has_future"]),
+        core.FUTURE_COUNT: t(np.maximum(horizon - sample["t"] - 1, 0)),
+    }
     for k in keys:
         batch[k] = t(sample["obs"][k])
         batch[core.NEXT + k] = t(sample["next_obs"][k])
@@ -241,7 +249,9 @@ class OnlineTrainer:
         self.policy.train()
         sums: dict[str, float] = {}
         for _ in range(self.cfg.online.updates_per_cycle):
-            batch = to_transition_batch(self.buffer.sample(self.batch_size, rng), self.keys, self.device)
+            batch = to_transition_batch(
+                self.buffer.sample(self.batch_size, rng), self.keys, self.horizon, self.device
+            )
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -287,6 +297,10 @@ class OnlineTrainer:
                 for episode in r.episodes():
                     self.buffer.add_episode(*episode)
             self._append_replay(rollouts)
+            if cycle == 0 and cfg.policy.pretrained_path is None:
+                # No dataset statistics online: normalise inputs with those of the first episodes
+                # (saved with the weights, so a resumed or evaluated policy uses the same ones).
+                self.policy.set_observation_stats(self.buffer.observation_stats())
             n_episodes = sum(r.actions.shape[0] for r in rollouts)
             self.progress.episodes += n_episodes
             self.progress.env_steps += n_episodes * self.horizon

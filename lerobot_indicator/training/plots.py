@@ -14,7 +14,8 @@ PANELS = (
     ("success rate", ("eval_success_rate", "train_success_rate")),
     ("final distance to goal (ground truth)", ("eval_final_distance", "train_final_distance")),
     ("indicator reward vs ground truth", ("reward_accuracy", "false_negative_rate")),
-    ("learning core", ("q_mean", "frac_positive", "frac_filtered")),
+    ("mean Q(o, g, a)", ("q_mean", "q_target_mean")),
+    ("fraction of sampled transitions", ("frac_positive", "frac_filtered")),
 )
 
 
@@ -23,7 +24,7 @@ def read_metrics(path: Path) -> list[dict]:
 
 
 def plot_learning_curve(metrics_path: Path, png_path: Path, title: str | None = None) -> Path:
-    """Four panels vs environment steps; series absent from the log (e.g. no ground truth) are skipped."""
+    """Panels vs environment steps; series absent from the log (e.g. no ground truth) are skipped."""
     rows = read_metrics(metrics_path)
     fig, axes = plt.subplots(1, len(PANELS), figsize=(5 * len(PANELS), 3.8))
     for ax, (ylabel, keys) in zip(axes, PANELS, strict=True):

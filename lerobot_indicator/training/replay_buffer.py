@@ -181,6 +181,19 @@ class EpisodeReplayBuffer:
             batch["gt_desired"] = self.gt_desired[ep]
         return batch
 
+    def observation_stats(self) -> dict[str, dict[str, np.ndarray]]:
+        """Mean/std of every stored observation key over all stored frames (per dimension for vectors,
+        per channel, shaped (C, 1, 1), for images), in the layout of LeRobot's dataset stats."""
+        stats = {}
+        for key, packed in self.obs.items():
+            x = packed[: self.num_episodes]  # (episodes, T + 1, ...)
+            axes = (0, 1) if x.ndim == 3 else (0, 1, *range(3, x.ndim))
+            keep = x.ndim > 3
+            stats[key] = {"mean": x.mean(axis=axes, keepdims=keep), "std": x.std(axis=axes, keepdims=keep)}
+            if keep:
+                stats[key] = {k: v.reshape(v.shape[2:]) for k, v in stats[key].items()}
+        return stats
+
     # ---- persistence (resume) ----
     def save(self, path: Path) -> None:
         """Write atomically (tmp file + rename): a crash mid-write never corrupts the last copy."""

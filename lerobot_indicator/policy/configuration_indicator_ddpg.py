@@ -1,0 +1,220 @@
+"""Configuration of the ``indicator_ddpg`` policy (Lin, Baweja, Held, CoRL 2019, section 5 and appendix)."""
+
+from dataclasses import dataclass, field
+
+from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
+from lerobot.optim import AdamConfig
+from lerobot.utils.constants import ACTION
+
+from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
+
+REWARD_MODES = ("indicator", "oracle")
+
+
+@PreTrainedConfig.register_subclass("indicator_ddpg")
+@dataclass
+class IndicatorDDPGConfig(PreTrainedConfig):
+    """Goal-conditioned DDPG trained with indicator rewards, hindsight relabeling, balancing and filtering.
+
+    ``observation_keys`` are the *compared* keys: the reward is R+ only when every one of them equals its goal
+    (``keys.goal_key``) bit for bit. The networks see exactly these keys and their goals.
+    """
+
+    # Compared observation keys; goals are ``goal_key(k)``. Images and states may be mixed.
+    observation_keys: list[str] = field(default_factory=lambda: ["observation.state"])
+
+    # Episode horizon T: gamma = (T-1)/T and the filter threshold q0 follow from it.
+    horizon: int = 25
+
+    # Reward: "indicator" (the paper's method) or "oracle" (ground-truth distance <= oracle_epsilon).
+    reward: str = "indicator"
+    oracle_epsilon: float = 0.1
+    positive_reward: float = 1.0
+    negative_reward: float = -1.0
+
+    # Relabeling (Algorithm 1). balance=True: p(next)=0.45, p(future t'>=t+2)=0.45, p(recorded)=0.1.
+    # balance=False (the paper's "Indicator" baseline): p(future over {t+1..T})=0.9, p(recorded)=0.1.
+    balance: bool = True
+    p_next: float = 0.45
+    p_future: float = 0.45
+    p_future_unbalanced: float = 0.9
+    # Reward filtering: drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
+    filter: bool = True
+    # Initial Q (the critic's output bias). The paper initialises Q "relatively low" so that filtering
+    # is not fooled early; None = R-/(1-gamma), the lowest possible return. Any value well below q0 keeps
+    # filtering safe; see docs/policy.md for the effect on learning speed.
+    q_init: float | None = None
+
+    # Offsets t'-t of the future frames fetched from a dataset in lerobot-train (all >= 2). One valid
+    # offset is picked uniformly per sample; docs/policy.md compares this with uniform t' in {t+2..T}.
+    future_offsets: list[int] = field(default_factory=lambda: [2, 4, 8, 16])
+
+    # Networks (paper appendix): 3 hidden layers of 256, tanh; 4 conv layers shared by observation and goal.
+    hidden_dims: list[int] = field(default_factory=lambda: [256, 256, 256])
+    conv_channels: list[int] = field(default_factory=lambda: [16, 32, 64, 64])
+    conv_kernel_size: int = 2
+    conv_stride: int = 2
+    # RopePush: spatial softmax with 32 keypoints before the fully connected layers.
+    spatial_softmax: bool = False
+    spatial_softmax_keypoints: int = 32
+    # Inputs normalised with the observation key's mean/std (observation and goal alike) are clipped.
+    input_clip: float = 5.0
+
+    # DDPG.
+    tau: float = 0.98  # target <- tau * target + (1 - tau) * online
+    action_l2: float = 1.0  # baselines' HER penalty on the squared actor output
+    learning_rate: float = 1e-3
+    # Exploration (used by the online trainer only, never by select_action).
+    noise_eps: float = 0.2
+    random_eps: float = 0.3
+
+    # lerobot-train's sampler never picks the last frame of an episode: it has no o_{t+1}.
+    drop_n_last_frames: int = 1
+
+    # Observations are normalised inside the networks (identically for observation and goal) so that the
+    # indicator comparison and relabeling see raw values; actions are in the env's [-1, 1] action space.
+    normalization_mapping: dict[str, NormalizationMode] = field(
+        default_factory=lambda: {
+            "VISUAL": NormalizationMode.IDENTITY,
+            "STATE": NormalizationMode.IDENTITY,
+            "ENV": NormalizationMode.IDENTITY,
+            "ACTION": NormalizationMode.IDENTITY,
+        }
+    )
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.observation_keys:
+            raise ValueError("observation_keys must name at least one compared observation key")
+        for key in self.observation_keys:
+            if is_ground_truth_key(key):
+                raise ValueError(
+                    f"{key!r} is a ground-truth key: it is for evaluation and the oracle baseline only and "
+                    "can never be a policy input (see docs/conventions.md)"
+                )
+            if is_goal_key(key):
+                raise ValueError(f"{key!r} is a goal key; list the observation key it is the goal of instead")
+            goal_key(key)  # raises on keys outside observation.*
+        if self.horizon < 2:
+            raise ValueError(f"horizon must be >= 2 (gamma = (T-1)/T), got {self.horizon}")
+        if self.reward not in REWARD_MODES:
+            raise ValueError(f"reward must be one of {REWARD_MODES}, got {self.reward!r}")
+        if not self.positive_reward > self.negative_reward:
+            raise ValueError("positive_reward must be larger than negative_reward")
+        if min(self.p_next, self.p_future) < 0 or self.p_next + self.p_future > 1:
+            raise ValueError(
+                f"p_next={self.p_next}, p_future={self.p_future} are not probabilities summing <= 1"
+            )
+        if not 0 <= self.p_future_unbalanced <= 1:
+            raise ValueError(f"p_future_unbalanced must be in [0, 1], got {self.p_future_unbalanced}")
+        if not self.future_offsets or min(self.future_offsets) < 2:
+            raise ValueError(
+                f"future_offsets must be non-empty and all >= 2 (t' >= t+2), got {self.future_offsets}"
+            )
+        if self.q_init is not None and not self.q_min <= self.q_init < self.q0:
+            raise ValueError(
+                f"q_init must be in [R-/(1-gamma), q0) = [{self.q_min}, {self.q0}), got {self.q_init}"
+            )
+        if not 0 <= self.tau <= 1:
+            raise ValueError(f"tau must be in [0, 1], got {self.tau}")
+        if len(self.conv_channels) == 0 or len(self.hidden_dims) == 0:
+            raise ValueError("conv_channels and hidden_dims must not be empty")
+
+    # Paper quantities derived from the horizon.
+    @property
+    def gamma(self) -> float:
+        return (self.horizon - 1) / self.horizon
+
+    @property
+    def q_min(self) -> float:
+        return self.negative_reward / (1 - self.gamma)
+
+    @property
+    def initial_q(self) -> float:
+        return self.q_min if self.q_init is None else self.q_init
+
+    @property
+    def q_max(self) -> float:
+        return self.positive_reward / (1 - self.gamma)
+
+    @property
+    def q0(self) -> float:
+        """Filter threshold 0.5 [R- + gamma R+/(1-gamma) + R+/(1-gamma)] (appendix table)."""
+        g = self.gamma
+        r_pos, r_neg = self.positive_reward, self.negative_reward
+        return 0.5 * (r_neg + g * r_pos / (1 - g) + r_pos / (1 - g))
+
+    @property
+    def goal_keys(self) -> list[str]:
+        return [goal_key(k) for k in self.observation_keys]
+
+    def validate_features(self) -> None:
+        """Check the compared keys and their goals against ``input_features``, then keep only those as inputs.
+
+        ``make_policy`` fills ``input_features`` with every ``observation.*`` feature of the dataset (ground
+        truth included); the networks use exactly the compared keys and their goals.
+        """
+        features = self.input_features or {}
+        for key in self.observation_keys:
+            gkey = goal_key(key)
+            if key not in features and gkey in features:
+                raise ValueError(f"goal key {gkey!r} has no observation {key!r} in the input features")
+            if key not in features:
+                raise ValueError(
+                    f"observation key {key!r} is missing from the input features {sorted(features)}"
+                )
+            if gkey not in features:
+                raise ValueError(f"observation key {key!r} has no goal {gkey!r} in the input features")
+            if tuple(features[key].shape) != tuple(features[gkey].shape):
+                raise ValueError(
+                    f"{key!r} has shape {tuple(features[key].shape)} but its goal {gkey!r} has shape "
+                    f"{tuple(features[gkey].shape)}: they must be identical to be compared"
+                )
+            if features[key].type is FeatureType.VISUAL and len(features[key].shape) != 3:
+                raise ValueError(f"image key {key!r} must have shape (C, H, W), got {features[key].shape}")
+        visual = [k for k in self.observation_keys if features[k].type is FeatureType.VISUAL]
+        sizes = {tuple(features[k].shape[1:]) for k in visual}
+        if len(sizes) > 1:
+            raise ValueError(
+                f"image keys {visual} must share one (H, W) to be stacked as channels, got {sizes}"
+            )
+        if not self.output_features or ACTION not in self.output_features:
+            raise ValueError(
+                f"output features must contain {ACTION!r}, got {list(self.output_features or {})}"
+            )
+        keep = self.observation_keys + self.goal_keys
+        self.input_features = {k: features[k] for k in keep}
+
+    @property
+    def image_keys(self) -> list[str]:
+        return [k for k in self.observation_keys if self.input_features[k].type is FeatureType.VISUAL]
+
+    @property
+    def state_keys(self) -> list[str]:
+        return [k for k in self.observation_keys if self.input_features[k].type is not FeatureType.VISUAL]
+
+    @property
+    def action_dim(self) -> int:
+        feature: PolicyFeature = self.output_features[ACTION]
+        return int(feature.shape[0])
+
+    # lerobot-train dataset access: index 0 = o_t, 1 = o_{t+1}, then the future offsets.
+    @property
+    def observation_delta_indices(self) -> list[int]:
+        return [0, 1, *self.future_offsets]
+
+    @property
+    def action_delta_indices(self) -> None:
+        return None
+
+    @property
+    def reward_delta_indices(self) -> None:
+        return None
+
+    def get_optimizer_preset(self) -> AdamConfig:
+        # No gradient clipping: the paper and baselines' HER do not clip, and a global norm clip over the
+        # concatenated actor+critic parameters would couple their step sizes.
+        return AdamConfig(lr=self.learning_rate, grad_clip_norm=0.0)
+
+    def get_scheduler_preset(self) -> None:
+        return None

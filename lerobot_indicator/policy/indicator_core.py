@@ -1,0 +1,305 @@
+"""The learning core of Lin, Baweja, Held (CoRL 2019): relabel -> indicator reward -> filter -> DDPG losses.
+
+Pure tensors, shared by every training path (``lerobot-train`` through ``IndicatorDDPGPolicy.forward`` and
+the online trainer). It works on a *transition batch*: a flat dict with, for every compared key ``k`` of
+``config.observation_keys`` (B = batch size):
+
+==========================================  ===========================================================
+``k``                                        o_t
+``next.k``                                   o_{t+1}
+``future.k``                                 o_{t'}, one candidate future frame with t' >= t+2
+``goal_key(k)``                              the recorded goal (what the episode was collected for)
+``action``                                   a_t, (B, A) in [-1, 1]
+``future.valid``                             bool (B,): False when no t' >= t+2 exists (o_{t'} ignored)
+``future.count`` (optional)                  long (B,): how many t' the candidate was drawn from
+``next.valid`` (optional)                    bool (B,): False drops the transition (no o_{t+1})
+``next.observation.gt_achieved_goal`` (opt)  ground truth of o_{t+1}   } oracle reward and the reward
+``future.observation.gt_achieved_goal`` (o)  ground truth of o_{t'}    } accuracy / false-negative
+``observation.gt_desired_goal`` (optional)   ground truth of the goal  } statistics
+==========================================  ===========================================================
+
+Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
+"""
+
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+from torch.func import functional_call
+
+from lerobot_indicator.keys import goal_key
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+
+ACTION = "action"
+NEXT = "next."
+FUTURE = "future."
+HAS_FUTURE = "future.valid"
+FUTURE_COUNT = "future.count"
+NEXT_VALID = "next.valid"
+GT_ACHIEVED = "observation.gt_achieved_goal"
+GT_DESIRED = "observation.gt_desired_goal"
+GT_NEXT_ACHIEVED = NEXT + GT_ACHIEVED
+GT_FUTURE_ACHIEVED = FUTURE + GT_ACHIEVED
+
+# Relabel branches / goal sources.
+SOURCE_NEXT, SOURCE_FUTURE, SOURCE_RECORDED = 0, 1, 2
+
+
+@dataclass
+class Relabeling:
+    """The probability branch each transition drew and the goal it got (they differ for fallbacks)."""
+
+    branch: Tensor  # long (B,): SOURCE_* drawn with p_next / p_future / rest
+    source: Tensor  # long (B,): SOURCE_* of the goal actually used
+
+
+def relabel_sources(
+    has_future: Tensor,
+    config: IndicatorDDPGConfig,
+    future_count: Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> Relabeling:
+    """Draw each transition's goal source (Algorithm 1).
+
+    balance=True: o_{t+1} with p_next, o_{t'} (t' >= t+2) with p_future, the recorded goal otherwise; when no
+    t' >= t+2 exists (t = T-1) the future branch falls back to the recorded goal, which keeps that branch a
+    (mostly) negative example as in the paper.
+    balance=False (HER-style "Indicator" baseline): with p_future_unbalanced the goal is uniform over
+    {t+1} + the ``future_count`` candidates (so o_{t+1} with probability 1/(future_count+1)), else recorded.
+    ``future_count`` defaults to one candidate where ``has_future``.
+    """
+    batch_size, device = has_future.shape[0], has_future.device
+    gen_device = generator.device if generator is not None else device
+    u = torch.rand(batch_size, generator=generator, device=gen_device).to(device)
+    recorded = torch.full_like(u, SOURCE_RECORDED, dtype=torch.long)
+    if config.balance:
+        branch = torch.where(
+            u < config.p_next,
+            SOURCE_NEXT,
+            torch.where(u < config.p_next + config.p_future, SOURCE_FUTURE, recorded),
+        )
+        source = torch.where((branch == SOURCE_FUTURE) & ~has_future, SOURCE_RECORDED, branch)
+        return Relabeling(branch=branch, source=source)
+
+    branch = torch.where(u < config.p_future_unbalanced, SOURCE_FUTURE, recorded)
+    count = has_future.long() if future_count is None else future_count.to(device).long() * has_future
+    v = torch.rand(batch_size, generator=generator, device=gen_device).to(device)
+    pick_next = v < 1.0 / (count + 1).to(v.dtype)
+    source = torch.where((branch == SOURCE_FUTURE) & pick_next, SOURCE_NEXT, branch)
+    return Relabeling(branch=branch, source=source)
+
+
+def _pick(source: Tensor, nxt: Tensor, future: Tensor, recorded: Tensor) -> Tensor:
+    shape = (-1,) + (1,) * (nxt.dim() - 1)
+    s = source.view(shape)
+    return torch.where(s == SOURCE_NEXT, nxt, torch.where(s == SOURCE_FUTURE, future, recorded))
+
+
+def select_goals(batch: dict[str, Tensor], keys: list[str], source: Tensor) -> dict[str, Tensor]:
+    """Goal observation per transition, keyed by the compared observation keys."""
+    return {k: _pick(source, batch[NEXT + k], batch[FUTURE + k], batch[goal_key(k)]) for k in keys}
+
+
+def rows_equal(a: Tensor, b: Tensor) -> Tensor:
+    """Per-row bit-for-bit equality (floats compared by their bit patterns: -0.0 != 0.0, NaN == same NaN)."""
+    if a.shape != b.shape:
+        raise ValueError(f"cannot compare observations of shapes {tuple(a.shape)} and {tuple(b.shape)}")
+    if a.dtype.is_floating_point:
+        int_type = {2: torch.int16, 4: torch.int32, 8: torch.int64}[a.element_size()]
+        a, b = a.contiguous().view(int_type), b.to(a.dtype).contiguous().view(int_type)
+    return (a == b).flatten(1).all(dim=1)
+
+
+def indicator_reward(
+    next_obs: dict[str, Tensor], goal: dict[str, Tensor], r_pos: float, r_neg: float
+) -> Tensor:
+    """R+ where o_{t+1} equals the goal on every compared key bit for bit, else R- (paper eq. 3)."""
+    equal = torch.stack([rows_equal(next_obs[k], goal[k]) for k in goal]).all(dim=0)
+    return torch.where(equal, r_pos, r_neg)
+
+
+def ground_truth_success(gt_achieved_next: Tensor, gt_goal: Tensor, epsilon: float) -> Tensor:
+    """The evaluation reward's success test ||s_{t+1} - s_g|| <= epsilon (paper appendix A)."""
+    return torch.linalg.vector_norm((gt_achieved_next - gt_goal).flatten(1), dim=1) <= epsilon
+
+
+def ground_truth_goal(batch: dict[str, Tensor], source: Tensor) -> Tensor | None:
+    """Ground truth of the chosen goal: gt_achieved of o_{t+1} / o_{t'}, or gt_desired if recorded."""
+    if not all(k in batch for k in (GT_NEXT_ACHIEVED, GT_FUTURE_ACHIEVED, GT_DESIRED)):
+        return None
+    return _pick(source, batch[GT_NEXT_ACHIEVED], batch[GT_FUTURE_ACHIEVED], batch[GT_DESIRED])
+
+
+def filter_keep(reward: Tensor, q: Tensor, q0: float, r_neg: float) -> Tensor:
+    """Keep all but the suspected false negatives: R- transitions with Q(o_t, o_g, a_t) > q0."""
+    return ~((reward == r_neg) & (q > q0))
+
+
+def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
+    return (x * mask).sum() / mask.sum().clamp_min(1)
+
+
+def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
+    """target <- tau * target + (1 - tau) * online (paper: target network smoothing 0.98)."""
+    with torch.no_grad():
+        for t, o in zip(target.parameters(), online.parameters(), strict=True):
+            t.lerp_(o, 1.0 - tau)
+        for t, o in zip(target.buffers(), online.buffers(), strict=True):
+            t.copy_(o)
+
+
+def frozen_call(module: nn.Module, *args: Tensor) -> Tensor:
+    """Call ``module`` with detached parameters: gradients reach the inputs, never the module's weights."""
+    params = {name: p.detach() for name, p in module.named_parameters()}
+    buffers = dict(module.named_buffers())
+    return functional_call(module, {**params, **buffers}, args)
+
+
+def indicator_ddpg_loss(
+    batch: dict[str, Tensor],
+    actor: nn.Module,
+    critic: nn.Module,
+    target_actor: nn.Module,
+    target_critic: nn.Module,
+    config: IndicatorDDPGConfig,
+    generator: torch.Generator | None = None,
+) -> tuple[Tensor, dict[str, float]]:
+    """One DDPG step's loss on a transition batch (module docstring), with relabeling, rewards and filtering.
+
+    Returns ``critic_loss + actor_loss``: the critic gets gradients only from the TD loss (targets and the
+    filter's Q are computed without gradients) and the actor only from -Q(o, g, pi(o, g)) + action_l2 *
+    pi^2 (evaluated through a parameter-detached critic), so one backward and one optimizer step over both
+    parameter sets equals separate actor and critic updates.
+    """
+    keys = config.observation_keys
+    obs = {k: batch[k] for k in keys}
+    next_obs = {k: batch[NEXT + k] for k in keys}
+    action = batch[ACTION]
+    batch_size = action.shape[0]
+    has_future = batch[HAS_FUTURE].bool()
+    valid = batch.get(NEXT_VALID, torch.ones(batch_size, dtype=torch.bool, device=action.device)).bool()
+
+    relabel = relabel_sources(has_future, config, batch.get(FUTURE_COUNT), generator)
+    goal = select_goals(batch, keys, relabel.source)
+    gt_goal = ground_truth_goal(batch, relabel.source)
+
+    if config.reward == "indicator":
+        reward = indicator_reward(next_obs, goal, config.positive_reward, config.negative_reward)
+    else:
+        if gt_goal is None:
+            raise ValueError(
+                f"reward='oracle' needs ground truth in the batch: {GT_NEXT_ACHIEVED}, {GT_FUTURE_ACHIEVED}, "
+                f"{GT_DESIRED}"
+            )
+        success = ground_truth_success(batch[GT_NEXT_ACHIEVED], gt_goal, config.oracle_epsilon)
+        reward = torch.where(success, config.positive_reward, config.negative_reward)
+
+    q = critic(obs, goal, action)
+    with torch.no_grad():
+        next_q = target_critic(next_obs, goal, target_actor(next_obs, goal))
+        # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
+        target = (reward + config.gamma * next_q).clamp(config.q_min, config.q_max)
+        keep = (
+            valid & filter_keep(reward, q.detach(), config.q0, config.negative_reward)
+            if config.filter
+            else valid
+        )
+    keep_f = keep.to(q.dtype)
+    critic_loss = masked_mean((q - target) ** 2, keep_f)
+
+    pi = actor(obs, goal)
+    q_pi = frozen_call(critic, obs, goal, pi)
+    actor_loss = masked_mean(-q_pi + config.action_l2 * (pi**2).mean(dim=1), keep_f)
+
+    valid_f = valid.float()
+    positive = (reward == config.positive_reward).float()
+    stats = {
+        "critic_loss": critic_loss.item(),
+        "actor_loss": actor_loss.item(),
+        "q_mean": masked_mean(q.detach(), valid_f).item(),
+        "q_target_mean": masked_mean(target, valid_f).item(),
+        "frac_positive": masked_mean(positive, valid_f).item(),
+        "frac_filtered": masked_mean((~keep).float(), valid_f).item(),
+        "frac_goal_next": masked_mean((relabel.source == SOURCE_NEXT).float(), valid_f).item(),
+        "frac_goal_future": masked_mean((relabel.source == SOURCE_FUTURE).float(), valid_f).item(),
+        "frac_goal_recorded": masked_mean((relabel.source == SOURCE_RECORDED).float(), valid_f).item(),
+    }
+    if gt_goal is not None:
+        stats |= reward_statistics(reward, batch[GT_NEXT_ACHIEVED], gt_goal, keep, valid, config)
+    return critic_loss + actor_loss, stats
+
+
+def reward_statistics(
+    reward: Tensor, gt_next: Tensor, gt_goal: Tensor, keep: Tensor, valid: Tensor, config: IndicatorDDPGConfig
+) -> dict[str, float]:
+    """How the proxy reward compares with the ground-truth one (paper section 4): accuracy and error rates.
+
+    ``false_negative_rate`` = P(R- | ground-truth success); ``false_negative_rate_kept`` is the same among the
+    transitions the filter kept, which shows what filtering removes.
+    """
+    gt_pos = ground_truth_success(gt_next, gt_goal, config.oracle_epsilon) & valid
+    gt_neg = ~gt_pos & valid
+    pos = (reward == config.positive_reward) & valid
+    neg = ~pos & valid
+    kept_gt_pos = gt_pos & keep
+    return {
+        "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()).item(),
+        "false_negative_rate": ((neg & gt_pos).sum() / gt_pos.sum().clamp_min(1)).item(),
+        "false_positive_rate": ((pos & gt_neg).sum() / gt_neg.sum().clamp_min(1)).item(),
+        "false_negative_rate_kept": ((neg & kept_gt_pos).sum() / kept_gt_pos.sum().clamp_min(1)).item(),
+        "frac_gt_positive": masked_mean(gt_pos.float(), valid.float()).item(),
+    }
+
+
+def dataset_batch_to_transitions(
+    batch: dict[str, Tensor], config: IndicatorDDPGConfig, generator: torch.Generator | None = None
+) -> dict[str, Tensor]:
+    """Turn a ``lerobot-train`` batch into a transition batch.
+
+    With ``observation_delta_indices = [0, 1, *future_offsets]`` every ``observation.*`` key arrives as
+    (B, 2 + n_offsets, ...) with ``<key>_is_pad`` (B, 2 + n_offsets) marking frames past the episode end.
+    Index 0 is o_t, 1 is o_{t+1}; the future frame is one *valid* offset picked uniformly per sample.
+    """
+    first = config.observation_keys[0]
+    pad_key = f"{first}_is_pad"
+    n_frames = 2 + len(config.future_offsets)
+    if batch[first].dim() < 2 or batch[first].shape[1] != n_frames:
+        raise ValueError(
+            f"{first!r} has shape {tuple(batch[first].shape)}: expected (B, {n_frames}, ...) from "
+            f"observation_delta_indices {config.observation_delta_indices}"
+        )
+    batch_size, device = batch[first].shape[0], batch[first].device
+    if pad_key in batch:
+        is_pad = batch[pad_key].bool()
+    else:
+        is_pad = torch.zeros(batch_size, n_frames, dtype=torch.bool, device=device)
+    future_ok = ~is_pad[:, 2:]
+    count = future_ok.sum(dim=1)
+    has_future = count > 0
+    weights = torch.where(
+        has_future[:, None], future_ok.float(), torch.ones_like(future_ok, dtype=torch.float)
+    )
+    gen_device = generator.device if generator is not None else device
+    pick = torch.multinomial(weights.to(gen_device), 1, generator=generator).squeeze(1).to(device) + 2
+    rows = torch.arange(batch_size, device=device)
+
+    out = {
+        ACTION: batch[ACTION],
+        HAS_FUTURE: has_future,
+        FUTURE_COUNT: count,
+        NEXT_VALID: ~is_pad[:, 1],
+    }
+    for k in config.observation_keys:
+        out[k] = batch[k][:, 0]
+        out[NEXT + k] = batch[k][:, 1]
+        out[FUTURE + k] = batch[k][rows, pick]
+        out[goal_key(k)] = batch[goal_key(k)][:, 0]
+    if GT_ACHIEVED in batch and GT_DESIRED in batch:
+        out[GT_NEXT_ACHIEVED] = batch[GT_ACHIEVED][:, 1]
+        out[GT_FUTURE_ACHIEVED] = batch[GT_ACHIEVED][rows, pick]
+        out[GT_DESIRED] = batch[GT_DESIRED][:, 0]
+    return out
+
+
+def is_transition_batch(batch: dict[str, Tensor], config: IndicatorDDPGConfig) -> bool:
+    return NEXT + config.observation_keys[0] in batch

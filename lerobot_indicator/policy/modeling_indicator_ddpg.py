@@ -1,0 +1,104 @@
+"""``IndicatorDDPGPolicy``: the paper's goal-conditioned DDPG as a LeRobot policy.
+
+``forward`` accepts either a ``lerobot-train`` dataset batch (observations stacked over
+``observation_delta_indices``) or a transition batch (``indicator_core`` docstring), which is what the online
+trainer passes. One returned loss trains actor and critic together; ``update()`` (called by lerobot-train
+after each optimizer step) moves the target networks.
+"""
+
+import copy
+
+import torch
+from lerobot.policies.pretrained import PreTrainedPolicy
+from torch import Tensor
+
+from lerobot_indicator.keys import goal_key
+from lerobot_indicator.policy import indicator_core
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
+
+
+class IndicatorDDPGPolicy(PreTrainedPolicy):
+    config_class = IndicatorDDPGConfig
+    name = "indicator_ddpg"
+
+    def __init__(
+        self,
+        config: IndicatorDDPGConfig,
+        dataset_stats: dict[str, dict[str, Tensor]] | None = None,
+        dataset_meta=None,
+    ):
+        super().__init__(config)
+        config.validate_features()
+        self.config = config
+        self.actor = Actor(config, dataset_stats)
+        self.critic = Critic(config, dataset_stats)
+        self.target_actor = copy.deepcopy(self.actor).requires_grad_(False)
+        self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
+
+    def set_observation_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
+        """Input normalisation of every network (online and target) from ``{key: {"mean", "std"}}``."""
+        for net in (self.actor, self.critic, self.target_actor, self.target_critic):
+            net.encoder.set_stats(stats)
+
+    def get_optim_params(self) -> list[dict]:
+        # Target networks are moved by update(), never by the optimizer.
+        return [{"params": [*self.actor.parameters(), *self.critic.parameters()]}]
+
+    def reset(self) -> None:
+        pass
+
+    def update(self) -> None:
+        indicator_core.soft_update(self.target_actor, self.actor, self.config.tau)
+        indicator_core.soft_update(self.target_critic, self.critic, self.config.tau)
+
+    def forward(
+        self, batch: dict[str, Tensor], generator: torch.Generator | None = None
+    ) -> tuple[Tensor, dict[str, float]]:
+        """Loss and logging stats; ``generator`` drives relabeling (default: torch's global RNG, which
+        lerobot-train seeds and restores on resume)."""
+        if not indicator_core.is_transition_batch(batch, self.config):
+            batch = indicator_core.dataset_batch_to_transitions(batch, self.config, generator)
+        return indicator_core.indicator_ddpg_loss(
+            batch, self.actor, self.critic, self.target_actor, self.target_critic, self.config, generator
+        )
+
+    def _split(self, batch: dict[str, Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+        missing = [k for k in self.config.observation_keys + self.config.goal_keys if k not in batch]
+        if missing:
+            raise KeyError(f"batch lacks the policy inputs {missing} (has {sorted(batch)})")
+        obs = {k: batch[k] for k in self.config.observation_keys}
+        goal = {k: batch[goal_key(k)] for k in self.config.observation_keys}
+        return obs, goal
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        return self.select_action(batch)[:, None]
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """Deterministic pi(o, o_g), (B, A) in [-1, 1] (evaluation)."""
+        obs, goal = self._split(batch)
+        return self.actor(obs, goal)
+
+    @torch.no_grad()
+    def select_exploration_action(
+        self,
+        batch: dict[str, Tensor],
+        noise_eps: float | None = None,
+        random_eps: float | None = None,
+        generator: torch.Generator | None = None,
+    ) -> Tensor:
+        """Behaviour policy of baselines' HER: pi + N(0, noise_eps^2) clipped to [-1, 1], replaced by a
+        uniform random action with probability random_eps (defaults from the config)."""
+        noise_eps = self.config.noise_eps if noise_eps is None else noise_eps
+        random_eps = self.config.random_eps if random_eps is None else random_eps
+        action = self.select_action(batch)
+        gen_device = generator.device if generator is not None else action.device
+        noise = torch.randn(action.shape, generator=generator, device=gen_device).to(action.device)
+        action = (action + noise_eps * noise).clamp(-1.0, 1.0)
+        rand_action = (
+            torch.rand(action.shape, generator=generator, device=gen_device).to(action.device) * 2 - 1
+        )
+        use_random = torch.rand(action.shape[0], generator=generator, device=gen_device).to(action.device)
+        return torch.where((use_random < random_eps)[:, None], rand_action, action)

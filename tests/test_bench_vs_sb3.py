@@ -1,0 +1,87 @@
+"""The SB3 GoalEnv adapter of ``scripts/bench_vs_sb3.py``: vectorised reward and a few SB3 DDPG+HER steps."""
+
+import numpy as np
+import pytest
+
+from lerobot_indicator.envs.goal_env_adapter import GoalEnvAdapter, make_goal_env, sparse_goal_reward
+
+
+def test_sparse_goal_reward_is_vectorised_and_uses_epsilon():
+    achieved = np.zeros((4, 3), np.float32)
+    desired = np.array([[0, 0, 0], [0.05, 0, 0], [0.0501, 0, 0], [0, 0.3, 0.4]], np.float32)
+    np.testing.assert_array_equal(sparse_goal_reward(achieved, desired, 0.05), [1, 1, -1, -1])
+    assert sparse_goal_reward(achieved[0], desired[3], 0.05).shape == ()
+    with pytest.raises(ValueError, match="differ in shape"):
+        sparse_goal_reward(achieved, desired[:2], 0.05)
+
+
+def test_adapter_matches_env_reward_and_info():
+    env = make_goal_env()
+    try:
+        obs, info = env.reset(seed=3)
+        assert set(obs) == {"observation", "achieved_goal", "desired_goal"}
+        assert env.observation_space.contains(obs)
+        np.testing.assert_array_equal(obs["desired_goal"], info["gt_desired_goal"])
+        achieved, desired, rewards = [], [], []
+        for _ in range(5):
+            obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+            achieved.append(obs["achieved_goal"])
+            desired.append(obs["desired_goal"])
+            rewards.append(reward)
+        # The batch call agrees with the env's own per-step ground-truth reward...
+        batch = env.compute_reward(np.stack(achieved), np.stack(desired), [info] * 5)
+        np.testing.assert_array_equal(batch, rewards)
+        # ...and an episode relabeled with its own achieved goal is a success.
+        assert env.compute_reward(obs["achieved_goal"], obs["achieved_goal"], info) == 1.0
+    finally:
+        env.close()
+
+
+def test_adapter_rejects_image_observations():
+    import gymnasium as gym
+
+    class Images(gym.Env):
+        observation_space = gym.spaces.Dict(
+            {
+                "agent_pos": gym.spaces.Box(-1, 1, (3,)),
+                "goal_state": gym.spaces.Box(-1, 1, (3,)),
+                "pixels": gym.spaces.Box(0, 255, (8, 8, 3)),
+            }
+        )
+        action_space = gym.spaces.Box(-1, 1, (3,))
+
+    with pytest.raises(ValueError, match="state observations only"):
+        GoalEnvAdapter(Images())
+
+
+def test_sb3_ddpg_her_runs_on_the_reach_env():
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import DDPG, HerReplayBuffer
+
+    env = make_goal_env()
+    model = DDPG(
+        "MultiInputPolicy",
+        env,
+        learning_starts=0,
+        batch_size=16,
+        train_freq=(1, "episode"),
+        gradient_steps=2,
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+        policy_kwargs={"net_arch": [16, 16]},
+        buffer_size=1000,
+        seed=0,
+        device="cpu",
+    )
+    model.learn(total_timesteps=50)  # two episodes: HER relabels through compute_reward
+    assert model.num_timesteps == 50 and model._n_updates == 4
+    # HER's relabeled samples get their reward from the adapter's compute_reward: it must agree with the
+    # (achieved, desired) goals of every sample, relabeled (80%) or not.
+    samples = model.replay_buffer.sample(64)
+    achieved = samples.next_observations["achieved_goal"].numpy()
+    desired = samples.observations["desired_goal"].numpy()
+    expected = sparse_goal_reward(achieved, desired, env.epsilon)
+    np.testing.assert_array_equal(samples.rewards.numpy()[:, 0], expected)
+    assert (expected == 1.0).any()  # some relabeled goals are reached (HER at work)
+    action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
+    assert action.shape == (3,) and np.all(np.abs(action) <= 1)

@@ -55,7 +55,7 @@ def test_recorded_dataset_push_round_trip(tmp_path, local_hub, monkeypatch):
     assert ("POST", "/api/validate-yaml") in local_hub.requests
 
     downloaded = LeRobotDataset(repo_id, root=tmp_path / "download", video_backend="pyav")
-    assert (downloaded.num_episodes, len(downloaded)) == (2, 2 * T)
+    assert (downloaded.num_episodes, len(downloaded)) == (2, 2 * (T + 1))  # T + 1 frames: o_0..o_T
     for i in range(len(local)):
         a, b = local[i], downloaded[i]
         for key, value in a.items():

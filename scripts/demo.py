@@ -62,6 +62,8 @@ def main() -> int:
             f"--policy.path={checkpoint}",
             "--env.type=sawyer_reach",
             "--env.obs_type=state",
+            # lerobot-eval's avg_sum_reward becomes minus the mean final distance to the goal.
+            "--env.eval_reward=final_distance",
             f"--eval.n_episodes={args.eval_episodes}",
             "--eval.batch_size=10",
             "--eval.use_async_envs=false",
@@ -74,6 +76,7 @@ def main() -> int:
     summary = {
         "pc_success": info["pc_success"],
         "n_episodes": info.get("n_episodes", args.eval_episodes),
+        "mean_final_distance_m": -info["avg_sum_reward"],
         "train_wall_s": round(train_s, 1),
         "eval_wall_s": round(eval_s, 1),
         "checkpoint": str(checkpoint),
@@ -83,6 +86,7 @@ def main() -> int:
     }
     print("\n==== demo: indicator_ddpg on state-based Sawyer reach ====")
     print(f"success rate (lerobot-eval, {summary['n_episodes']} episodes): {summary['pc_success']:.1f}%")
+    print(f"mean final distance to the goal (lerobot-eval): {summary['mean_final_distance_m']:.3f} m")
     metrics = [json.loads(line) for line in (train_dir / "metrics.jsonl").read_text().splitlines()]
     last = metrics[-1]
     summary["trainer_eval"] = {k: last[k] for k in ("env_steps", "eval_success_rate", "eval_final_distance")}

@@ -4,7 +4,8 @@ Runs ``lerobot-indicator-train`` for every (task, method, seed), resumably (a fi
 an interrupted one continues with ``--resume=true``), then aggregates the runs' ``metrics.jsonl`` into
 ``<out>/summary.json``, learning-curve plots and a markdown table.
 
-    python scripts/experiments.py --tasks='[reach_state]' --seeds='[0,1,2]' --out=docs/results/experiments
+    python scripts/experiments.py --tasks='[reach_state]' --seeds='[0,1,2]' --out=docs/results/experiments \
+        --runs_dir=outputs/experiments/runs
     python scripts/experiments.py --tasks='[reach_state]' --plot_only=true ...   # aggregate only
 """
 
@@ -61,9 +62,9 @@ class TaskPreset:
 
 
 TASKS: dict[str, TaskPreset] = {
-    "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 3000, 40, 2, 200),
+    "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 1600, 40, 4, 200),
     "reach_rgbd": TaskPreset(
-        ["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 2, 400, 10
+        ["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 4, 400, 10
     ),
     "rope_state": TaskPreset(
         ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
@@ -81,7 +82,9 @@ class ExperimentConfig:
     tasks: list[str] = field(default_factory=lambda: ["reach_state"])
     methods: list[str] = field(default_factory=lambda: list(METHODS))
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    # Summary, plot and table (small; commit them). Run directories (checkpoints, replay) go to runs_dir.
     out: Path = Path("outputs/experiments")
+    runs_dir: Path = Path("outputs/experiments/runs")
     # Overrides of the task presets' budget (None = preset).
     steps: int | None = None
     device: str = "cpu"
@@ -97,7 +100,7 @@ class ExperimentConfig:
 
 
 def run_dir(cfg: ExperimentConfig, task: str, method: str, seed: int) -> Path:
-    return cfg.out / "runs" / task / method / f"seed_{seed}"
+    return cfg.runs_dir / task / method / f"seed_{seed}"
 
 
 def read_rows(path: Path) -> list[dict]:

@@ -24,7 +24,11 @@ TINY = [
     "--save_freq=10",
     "--seed=7",
 ]
-ENVS = {"sawyer_reach": ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]}
+ENVS = {
+    "sawyer_reach": ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"],
+    "rope_push": ["--env.type=rope_push", "--env.obs_type=state"],
+}
+POLICY_KEYS = {"sawyer_reach": [], "rope_push": ["--policy.observation_keys=[observation.rope_xy]"]}
 
 
 def _env() -> dict[str, str]:
@@ -45,10 +49,11 @@ def _metrics(out: Path) -> list[dict]:
 @pytest.mark.parametrize("env_type", sorted(ENVS))
 def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
     out = tmp_path / "run"
-    _train(out, *ENVS[env_type], "--steps=10")
+    _train(out, *ENVS[env_type], *POLICY_KEYS[env_type], "--steps=10")
     rows = _metrics(out)
+    horizon = 5 if env_type == "sawyer_reach" else 3
     assert [r["cycle"] for r in rows] == [0, 1]
-    assert rows[-1]["step"] == 10 and rows[-1]["env_steps"] == 2 * 5
+    assert rows[-1]["step"] == 10 and rows[-1]["env_steps"] == 2 * horizon
     for key in ("critic_loss", "actor_loss", "q_mean", "frac_positive", "frac_filtered", "reward_accuracy"):
         assert key in rows[-1], key
     assert "eval_success_rate" in rows[-1] and "eval_final_distance" in rows[-1]
@@ -63,7 +68,8 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
         [
             str(BIN / "lerobot-eval"),
             f"--policy.path={pretrained}",
-            *[a for a in ENVS[env_type]],
+            *ENVS[env_type],
+            "--env.eval_reward=final_distance",
             "--eval.n_episodes=2",
             "--eval.batch_size=1",
             "--policy.device=cpu",
@@ -77,6 +83,8 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
     assert proc.returncode == 0, proc.stderr[-4000:]
     overall = json.loads((eval_dir / "eval_info.json").read_text())["overall"]
     assert 0.0 <= overall["pc_success"] <= 100.0
+    mean_final_distance = -overall["avg_sum_reward"]  # eval_reward=final_distance
+    assert 0.0 < mean_final_distance < 1.0
 
 
 def test_resume_continues_bit_for_bit(tmp_path):

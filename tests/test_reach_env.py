@@ -167,3 +167,25 @@ def test_missing_robosuite_error_names_the_fix(monkeypatch):
     with pytest.raises(ImportError) as err:
         require_robosuite()
     assert "pip install --no-deps robosuite==1.5.2" in str(err.value) and ROBOSUITE_FIX in str(err.value)
+
+
+@pytest.mark.parametrize("eval_reward", ["success", "final_distance"])
+def test_eval_reward_modes(eval_reward):
+    """The env reward is for evaluation only; "final_distance" makes lerobot-eval's avg_sum_reward equal
+    minus the mean final distance (0 on every step but the last)."""
+    env = gym.make(SAWYER_REACH_ID, max_episode_steps=4, episode_length=4, eval_reward=eval_reward)
+    obs, _ = env.reset(seed=3)
+    rewards, infos = [], []
+    for _ in range(4):
+        obs, reward, _, truncated, info = env.step(scripted_action(obs))
+        rewards.append(reward)
+        infos.append(info)
+    assert truncated
+    if eval_reward == "success":
+        assert rewards == [1.0 if i["is_success"] else -1.0 for i in infos]
+    else:
+        assert rewards[:3] == [0.0, 0.0, 0.0]
+        assert rewards[3] == -float(infos[3]["gt_distance"]) < 0
+    env.close()
+    with pytest.raises(ValueError, match="eval_reward"):
+        SawyerReachEnv(eval_reward="dense")

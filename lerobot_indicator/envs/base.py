@@ -26,6 +26,11 @@ from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.keys import GOAL_PREFIX
 
 OBS_TYPES = ("state", "rgb", "rgbd")
+# Evaluation-only env reward (training never uses it: the indicator reward comes from observations).
+# "success": R+ within epsilon else R- at every step (the paper's evaluation reward).
+# "final_distance": 0, then -gt_distance at step episode_length, so lerobot-eval's avg_sum_reward is
+# minus the mean final distance to the goal.
+EVAL_REWARDS = ("success", "final_distance")
 DEPTH_SUFFIX = "_depth"
 
 
@@ -56,6 +61,8 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         end_effector: EndEffectorConfig | dict | None = None,
         fps: int = 20,
         render_mode: str | None = "rgb_array",
+        episode_length: int | None = None,
+        eval_reward: str = "success",
     ):
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type: unknown {obs_type!r}; expected one of {OBS_TYPES}")
@@ -63,6 +70,12 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             raise ValueError(f"render_mode: only 'rgb_array' is supported, got {render_mode!r}")
         if fps <= 0:
             raise ValueError(f"fps must be > 0, got {fps}")
+        if eval_reward not in EVAL_REWARDS:
+            raise ValueError(f"eval_reward: unknown {eval_reward!r}; expected one of {EVAL_REWARDS}")
+        if eval_reward == "final_distance" and not episode_length:
+            raise ValueError("eval_reward 'final_distance' needs episode_length")
+        self.episode_length, self.eval_reward = episode_length, eval_reward
+        self._elapsed = 0
         self.camera_cfg = _as(GoalCameraConfig, camera)
         self.ee_cfg = _as(EndEffectorConfig, end_effector)
         if obs_type == "rgbd" and not self.camera_cfg.use_depth:
@@ -105,6 +118,20 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
 
     # --- what a task provides -------------------------------------------------------------------
     @abc.abstractmethod
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self._elapsed = 0
+
+    def _step_result(self, info: dict[str, Any]) -> tuple:
+        """``step()``'s return once the task has moved the sim: never terminates early (the time limit
+        truncates), and the reward is for evaluation only (``EVAL_REWARDS``)."""
+        self._elapsed += 1
+        if self.eval_reward == "final_distance":
+            reward = -float(info["gt_distance"]) if self._elapsed == self.episode_length else 0.0
+        else:
+            reward = 1.0 if info["is_success"] else -1.0
+        return self._get_obs(), reward, False, False, info
+
     def _build_model(self):
         """Compiled MjModel with a fixed camera named ``camera_cfg.name``."""
 

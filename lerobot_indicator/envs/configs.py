@@ -14,7 +14,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
-from lerobot_indicator.envs.base import DEPTH_SUFFIX, OBS_TYPES
+from lerobot_indicator.envs.base import DEPTH_SUFFIX, EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.keys import GOAL_PREFIX, goal_key
 
@@ -30,6 +30,9 @@ class SawyerGoalEnvConfig(EnvConfig):
     fps: int = 20
     episode_length: int = 25
     obs_type: str = "state"
+    # Evaluation-only env reward: "success" (the paper's +-1 per step) or "final_distance" (-distance at
+    # the last step, 0 before: lerobot-eval's avg_sum_reward is then minus the mean final distance).
+    eval_reward: str = "success"
     render_mode: str = "rgb_array"
     # Draw the robot with its primitive collision shapes for the camera (~10x faster in software GL).
     light_render: bool = True
@@ -45,6 +48,8 @@ class SawyerGoalEnvConfig(EnvConfig):
             self.end_effector = EndEffectorConfig(**self.end_effector)
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type: unknown {self.obs_type!r}; expected one of {OBS_TYPES}")
+        if self.eval_reward not in EVAL_REWARDS:
+            raise ValueError(f"eval_reward: unknown {self.eval_reward!r}; expected one of {EVAL_REWARDS}")
         if self.episode_length <= 0:
             raise ValueError(f"episode_length must be > 0, got {self.episode_length}")
         if self.fps <= 0:
@@ -93,6 +98,8 @@ class SawyerGoalEnvConfig(EnvConfig):
             "fps": self.fps,
             "light_render": self.light_render,
             "max_episode_steps": self.episode_length,
+            "episode_length": self.episode_length,
+            "eval_reward": self.eval_reward,
         }
 
     def get_env_processors(self):

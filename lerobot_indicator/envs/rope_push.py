@@ -85,6 +85,8 @@ class RopePushEnv(MujocoGoalEnv):
         goal_pushes: int = 2,
         cache_path: str | None = None,
         render_mode: str | None = "rgb_array",
+        episode_length: int | None = None,
+        eval_reward: str = "success",
     ):
         if epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {epsilon}")
@@ -96,7 +98,13 @@ class RopePushEnv(MujocoGoalEnv):
         self.push_config = push_config_for(end_effector, goal_pushes)
         self.epsilon = float(epsilon)
         super().__init__(
-            obs_type=obs_type, camera=camera, end_effector=end_effector, fps=fps, render_mode=render_mode
+            obs_type=obs_type,
+            camera=camera,
+            end_effector=end_effector,
+            fps=fps,
+            render_mode=render_mode,
+            episode_length=episode_length,
+            eval_reward=eval_reward,
         )
         self.sim = RopeSim(self.model, self.data, self.push_config)
         self.sim.reset_straight()
@@ -112,7 +120,6 @@ class RopePushEnv(MujocoGoalEnv):
         self._goal_qpos = self.data.qpos.copy()
         self._goal_links = self.sim.link_positions()
         self._goal_actions = np.zeros((0, 4))
-        self._t = 0
 
     def _build_model(self):
         cam = self.camera_cfg
@@ -137,8 +144,8 @@ class RopePushEnv(MujocoGoalEnv):
     def scripted_action(self) -> np.ndarray:
         """Data-collection expert (recorder's ``--policy=scripted``): the next hidden goal push, then no-op
         pushes. It reads hidden ground truth, so it is for demonstrations only, never a policy input."""
-        if self._t < len(self._goal_actions):
-            return self._goal_actions[self._t].astype(np.float32)
+        if self._elapsed < len(self._goal_actions):
+            return self._goal_actions[self._elapsed].astype(np.float32)
         return np.zeros(4, dtype=np.float32)
 
     # --- gymnasium API --------------------------------------------------------------------------
@@ -158,7 +165,6 @@ class RopePushEnv(MujocoGoalEnv):
         else:
             pair = generate_pair(self.sim, self.np_random, self.epsilon)
         self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
-        self._t = 0
         self.sim.set_qpos(self._goal_qpos)
         self._goal_links = self.sim.link_positions()
         if self.obs_type != "state":
@@ -168,10 +174,7 @@ class RopePushEnv(MujocoGoalEnv):
 
     def step(self, action):
         self.sim.push(np.asarray(action, dtype=np.float64).reshape(-1))
-        self._t += 1
-        info = self._info()
-        reward = 1.0 if info["is_success"] else -1.0  # ground-truth reward, for evaluation only
-        return self._get_obs(), reward, False, False, info
+        return self._step_result(self._info())
 
     def _get_obs(self) -> dict[str, Any]:
         obs = super()._get_obs()

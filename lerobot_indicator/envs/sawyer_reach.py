@@ -37,13 +37,21 @@ class SawyerReachEnv(MujocoGoalEnv):
         epsilon: float = 0.05,
         light_render: bool = True,
         render_mode: str | None = "rgb_array",
+        episode_length: int | None = None,
+        eval_reward: str = "success",
     ):
         if epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {epsilon}")
         self.epsilon = float(epsilon)
         self.light_render = light_render
         super().__init__(
-            obs_type=obs_type, camera=camera, end_effector=end_effector, fps=fps, render_mode=render_mode
+            obs_type=obs_type,
+            camera=camera,
+            end_effector=end_effector,
+            fps=fps,
+            render_mode=render_mode,
+            episode_length=episode_length,
+            eval_reward=eval_reward,
         )
         m = self.model
         self._site = m.site(EE_SITE).id
@@ -138,9 +146,7 @@ class SawyerReachEnv(MujocoGoalEnv):
         target = np.clip(self.data.site_xpos[self._site] + action * self._steps, self._low, self._high)
         self._glide_mocap(target, self.n_substeps)
         self._mj.mj_forward(self.model, self.data)  # derived quantities = f(state), as after a restore
-        info = self._info()
-        reward = 1.0 if info["is_success"] else -1.0  # ground-truth reward, for evaluation only
-        return self._get_obs(), reward, False, False, info
+        return self._step_result(self._info())
 
     def _info(self) -> dict[str, Any]:
         achieved = self._agent_state()

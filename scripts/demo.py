@@ -29,6 +29,7 @@ TRAIN_ARGS = [
     "--online.episodes_per_cycle=4",
     "--online.updates_per_cycle=40",
     "--online.eval_episodes=20",
+    "--online.torch_threads=1",
     "--env_eval_freq=400",
     "--save_freq=2400",
     "--seed=1",

@@ -89,6 +89,8 @@ class ExperimentConfig:
     steps: int | None = None
     device: str = "cpu"
     n_envs: int = 2
+    # 1 keeps runs fast when the CPU is shared (OpenMP spin-waiting otherwise dominates).
+    torch_threads: int = 1
     plot_only: bool = False
     extra_args: list[str] = field(default_factory=list)
 
@@ -131,6 +133,7 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
         f"--env_eval_freq={preset.env_eval_freq}",
         f"--save_freq={steps}",
         f"--seed={seed}",
+        f"--online.torch_threads={cfg.torch_threads}",
         f"--output_dir={out}",
         *cfg.extra_args,
     ]

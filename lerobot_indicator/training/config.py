@@ -34,6 +34,9 @@ class OnlineConfig:
     warmup_episodes: int = 0
     # Evaluation episodes (deterministic actor) every env_eval_freq steps.
     eval_episodes: int = 20
+    # torch intra-op threads (None = torch's default). On a CPU shared with other jobs, 1 avoids
+    # OpenMP threads spinning against each other (measured: 20 vs 1.2 updates/s, docs/policy.md).
+    torch_threads: int | None = None
 
 
 @dataclass

@@ -101,6 +101,8 @@ class OnlineTrainer:
         self.out.mkdir(parents=True, exist_ok=True)
         set_seed(cfg.seed)
         o = cfg.online
+        if o.torch_threads:
+            torch.set_num_threads(o.torch_threads)
         self.vec_env = make_env(cfg.env, n_envs=o.n_envs, use_async_envs=o.use_async_envs)[cfg.env.type][0]
         env_pre, env_post = make_env_pre_post_processors(cfg.env, cfg.policy)
         self.horizon = int(self.vec_env.call("_max_episode_steps")[0])

@@ -55,6 +55,22 @@ def _lookat_xyaxes(pos: np.ndarray, lookat: np.ndarray) -> str:
     return " ".join(f"{v:.6f}" for v in (*x, *y))
 
 
+def add_fixed_camera(worldbody, name: str, pos, lookat, fovy: float) -> None:
+    """Append a fixed MJCF camera at ``pos`` looking at ``lookat`` with vertical field of view ``fovy``."""
+    import xml.etree.ElementTree as ET
+
+    p, la = np.asarray(pos, float), np.asarray(lookat, float)
+    ET.SubElement(
+        worldbody,
+        "camera",
+        name=name,
+        mode="fixed",
+        pos=" ".join(f"{v:.6f}" for v in p),
+        xyaxes=_lookat_xyaxes(p, la),
+        fovy=f"{fovy:.6f}",
+    )
+
+
 def sawyer_table_xml(spec: SceneSpec) -> str:
     """MJCF of a Sawyer (default Rethink gripper and mount) at a table, with a mocap-welded end effector."""
     require_robosuite()
@@ -89,17 +105,8 @@ def sawyer_table_xml(spec: SceneSpec) -> str:
         solimp="0.99 0.99 0.001",
         torquescale="0.3",
     )
-    for name, pos, lookat, fovy in spec.cameras:
-        p, la = np.asarray(pos, float), np.asarray(lookat, float)
-        ET.SubElement(
-            task.worldbody,
-            "camera",
-            name=name,
-            mode="fixed",
-            pos=" ".join(f"{v:.6f}" for v in p),
-            xyaxes=_lookat_xyaxes(p, la),
-            fovy=f"{fovy:.6f}",
-        )
+    for camera in spec.cameras:
+        add_fixed_camera(task.worldbody, *camera)
     return task.get_xml()
 
 

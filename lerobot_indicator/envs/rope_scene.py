@@ -22,10 +22,8 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
-import numpy as np
-
 from lerobot_indicator.envs._robosuite import require_robosuite
-from lerobot_indicator.envs.models import HIDDEN_GROUP, RENDER_GROUP, _lookat_xyaxes
+from lerobot_indicator.envs.models import HIDDEN_GROUP, RENDER_GROUP, add_fixed_camera
 
 
 @dataclass(frozen=True)
@@ -128,17 +126,7 @@ def build_rope_model(
     world.merge(arena)
     for snippet in (_rope_xml(geom), _pusher_xml(geom)):
         world.worldbody.append(ET.fromstring(snippet))
-    name, pos, lookat, fovy = camera
-    p, la = np.asarray(pos, float), np.asarray(lookat, float)
-    ET.SubElement(
-        world.worldbody,
-        "camera",
-        name=name,
-        mode="fixed",
-        pos=" ".join(f"{v:.6f}" for v in p),
-        xyaxes=_lookat_xyaxes(p, la),
-        fovy=f"{fovy:.6f}",
-    )
+    add_fixed_camera(world.worldbody, *camera)
     option = world.root.find("option")
     for key, value in {
         "timestep": str(timestep),

@@ -209,42 +209,30 @@ class OnlineTrainer:
             self.buffer.add_episode({k: v[i] for k, v in obs.items()}, chunk["actions"][i], gt)
 
     # ---------------- the loop ----------------
+    def _episodes(self, seeds: list[int], explore: bool, **kwargs) -> Rollouts:
+        return run_episodes(
+            self.vec_env, self.policy, self.processors, stored_keys(self.keys), self.horizon,
+            seeds=seeds, explore=explore, **kwargs,
+        )  # fmt: skip
+
     def collect(self, cycle: int, generator: torch.Generator, warmup: bool) -> list[Rollouts]:
+        """Behaviour-policy episodes; seeds from (seed, cycle), so a resumed run replays them exactly."""
         n = self.cfg.online.n_envs
         rollouts = []
         for r in range(self.rounds_per_cycle):
             base = cycle_seed(self.cfg.seed, cycle) % 10**8 * 64 + r * n
-            rollouts.append(
-                run_episodes(
-                    self.vec_env,
-                    self.policy,
-                    self.processors,
-                    stored_keys(self.keys),
-                    self.horizon,
-                    seeds=[base + i for i in range(n)],
-                    explore=True,
-                    generator=generator,
-                    random_eps=1.0 if warmup else None,
-                )
-            )
+            seeds = [base + i for i in range(n)]
+            random_eps = 1.0 if warmup else None
+            rollouts.append(self._episodes(seeds, True, generator=generator, random_eps=random_eps))
         return rollouts
 
     def evaluate(self) -> dict[str, float]:
-        n = self.cfg.online.n_envs
-        results = [
-            run_episodes(
-                self.vec_env,
-                self.policy,
-                self.processors,
-                stored_keys(self.keys),
-                self.horizon,
-                seeds=[EVAL_SEED_OFFSET + s + i for i in range(n)],
-                explore=False,
-            )
-            for s in range(0, self.cfg.online.eval_episodes, n)
-        ]
-        success = np.concatenate([r.success for r in results])[: self.cfg.online.eval_episodes]
-        dist = np.concatenate([r.final_distance for r in results])[: self.cfg.online.eval_episodes]
+        """Deterministic actor on a fixed set of goals (the same at every evaluation)."""
+        n, n_eval = self.cfg.online.n_envs, self.cfg.online.eval_episodes
+        seeds = range(0, n_eval, n)
+        results = [self._episodes([EVAL_SEED_OFFSET + s + i for i in range(n)], False) for s in seeds]
+        success = np.concatenate([r.success for r in results])[:n_eval]
+        dist = np.concatenate([r.final_distance for r in results])[:n_eval]
         return {"eval_success_rate": float(success.mean()), "eval_final_distance": float(np.nanmean(dist))}
 
     def optimise(self, rng: np.random.Generator, generator: torch.Generator) -> dict[str, float]:

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 BIN = Path(sys.executable).parent
 TINY = [
@@ -115,3 +116,29 @@ def test_refuses_to_overwrite_a_run(tmp_path):
     assert proc.returncode != 0
     assert "already exists" in proc.stderr
     assert (out / "something").read_text() == "precious"
+
+
+def test_online_rollouts_are_recorded_as_a_lerobot_dataset(tmp_path, monkeypatch):
+    from lerobot.datasets import LeRobotDataset
+
+    root = tmp_path / "rollouts"
+    args = [
+        *ENVS["sawyer_reach"],
+        "--steps=10",
+        "--record.repo_id=local/online_rollouts",
+        f"--record.root={root}",
+    ]
+    _train(tmp_path / "run", *args)
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    ds = LeRobotDataset("local/online_rollouts", root=root, video_backend="pyav")
+    horizon = 5
+    assert ds.num_episodes == 2 and len(ds) == 2 * (horizon + 1)  # one episode per cycle, o_0..o_T
+    first, last = ds[0], ds[horizon]
+    assert {"observation.state", "observation.goal_state", "observation.gt_distance", "next.reward"} <= set(
+        first
+    )
+    assert torch.equal(first["observation.goal_state"], last["observation.goal_state"])
+    # Frame t's next.reward is the indicator reward of o_{t+1} against the recorded goal.
+    for t in range(horizon):
+        hit = torch.equal(ds[t + 1]["observation.state"], ds[t]["observation.goal_state"])
+        assert ds[t]["next.reward"].item() == (1.0 if hit else -1.0)

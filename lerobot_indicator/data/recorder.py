@@ -140,7 +140,7 @@ def _resume(cfg: RecordConfig) -> LeRobotDataset:
     )
 
 
-def _open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
+def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
     root = cfg.root
     _check_root(cfg)
     if not cfg.resume:
@@ -203,7 +203,7 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
             raise ValueError(
                 f"policy {cfg.policy!r} gives actions of shape {dry.shape}, env expects {vec_env.action_space.shape}"
             )
-        dataset = _open_dataset(cfg, features)
+        dataset = open_dataset(cfg, features)
         dataset = _record_episodes(cfg, vec_env, actions, dataset)
     finally:
         vec_env.close()
@@ -289,43 +289,66 @@ class EpisodeStepper:
         return batch(obs), batch(info), bool(terminated or truncated)
 
 
-def _record_episode(
-    cfg: RecordConfig, stepper: EpisodeStepper, actions, dataset: LeRobotDataset, task: str, seed: int
+def write_episode(
+    dataset: LeRobotDataset,
+    frames: list[dict[str, np.ndarray]],
+    actions: list[np.ndarray],
+    reward_keys: list[str],
+    task: str,
+    r_pos: float = 1.0,
+    r_neg: float = -1.0,
 ) -> int:
-    obs, info = stepper.reset(seed)
-    actions.reset()
-    frame = observation_frame(unbatch(obs), unbatch(info))
-    goal = {k: torch.from_numpy(np.ascontiguousarray(frame[goal_key(k)]))[None] for k in cfg.reward_keys}
-    max_steps = _episode_length(stepper.vec_env, cfg.env)
-    n, done = 0, False
-    while not done:
-        action = np.asarray(actions(obs, info), dtype=np.float32).reshape(stepper.vec_env.action_space.shape)
-        obs, info, done = stepper.step(action)
-        done = done or n + 1 >= max_steps
-        next_frame = observation_frame(unbatch(obs), unbatch(info))
-        reached = {k: torch.from_numpy(np.ascontiguousarray(next_frame[k]))[None] for k in cfg.reward_keys}
-        reward = float(indicator_reward(reached, goal, cfg.r_pos, cfg.r_neg)[0])
+    """Add one episode (``T + 1`` observation frames ``o_0..o_T``, ``T`` actions) to ``dataset``'s
+    episode buffer (the caller saves it); returns the number of frames added. ``next.reward`` is the indicator reward of the
+    recorded goal. Shared by this recorder and the online trainer's ``--record.*``."""
+    if len(frames) != len(actions) + 1:
+        raise ValueError(
+            f"an episode needs T + 1 observations for T actions, got {len(frames)} and {len(actions)}"
+        )
+    goal = {k: torch.from_numpy(np.ascontiguousarray(frames[0][goal_key(k)]))[None] for k in reward_keys}
+    horizon = len(actions)
+    for t, action in enumerate(actions):
+        reached = {k: torch.from_numpy(np.ascontiguousarray(frames[t + 1][k]))[None] for k in reward_keys}
+        reward = float(indicator_reward(reached, goal, r_pos, r_neg)[0])
         dataset.add_frame(
             {
-                **frame,
-                ACTION: action[0],
+                **frames[t],
+                ACTION: np.asarray(action, dtype=np.float32),
                 REWARD: np.array([reward], dtype=np.float32),
-                DONE: np.array([done], dtype=bool),
+                DONE: np.array([t == horizon - 1], dtype=bool),
                 "task": task,
             }
         )
-        frame, n = next_frame, n + 1
     # The final observation o_T as its own frame (see the module docstring).
+    final_action = np.zeros_like(np.asarray(actions[0], dtype=np.float32))
     dataset.add_frame(
         {
-            **frame,
-            ACTION: np.zeros(stepper.vec_env.action_space.shape[1:], dtype=np.float32),
+            **frames[-1],
+            ACTION: final_action,
             REWARD: np.zeros(1, dtype=np.float32),
             DONE: np.ones(1, dtype=bool),
             "task": task,
         }
     )
-    return n + 1
+    return horizon + 1
+
+
+def _record_episode(
+    cfg: RecordConfig, stepper: EpisodeStepper, actions, dataset: LeRobotDataset, task: str, seed: int
+) -> int:
+    obs, info = stepper.reset(seed)
+    actions.reset()
+    frames = [observation_frame(unbatch(obs), unbatch(info))]
+    taken = []
+    max_steps = _episode_length(stepper.vec_env, cfg.env)
+    done = False
+    while not done:
+        action = np.asarray(actions(obs, info), dtype=np.float32).reshape(stepper.vec_env.action_space.shape)
+        obs, info, done = stepper.step(action)
+        done = done or len(taken) + 1 >= max_steps
+        frames.append(observation_frame(unbatch(obs), unbatch(info)))
+        taken.append(action[0])
+    return write_episode(dataset, frames, taken, cfg.reward_keys, task, cfg.r_pos, cfg.r_neg)
 
 
 @parser.wrap()

@@ -41,7 +41,8 @@ class OnlineConfig:
 
 @dataclass
 class RecordConfig:
-    """Write every collected rollout to a LeRobotDataset (None repo_id = don't)."""
+    """Write every collected (behaviour-policy) episode to a LeRobotDataset, in the recorder's format
+    (docs/dataset_format.md, lossless images). None repo_id = don't."""
 
     repo_id: str | None = None
     root: str | None = None

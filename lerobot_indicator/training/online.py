@@ -134,6 +134,37 @@ class OnlineTrainer:
         self.progress = Progress()
         self.n_cycles = math.ceil(cfg.steps / o.updates_per_cycle)
         self.rounds_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs)
+        self.dataset = self._open_record_dataset() if cfg.record.repo_id else None
+
+    # ---------------- --record.*: rollouts as a LeRobotDataset ----------------
+    def _open_record_dataset(self):
+        from lerobot_indicator.data.features import dataset_features, unbatch
+        from lerobot_indicator.data.recorder import RecordConfig, open_dataset
+
+        r = self.cfg.record
+        self.record_cfg = RecordConfig(
+            env=self.cfg.env,
+            repo_id=r.repo_id,
+            root=r.root,
+            policy=f"indicator_ddpg online ({self.cfg.output_dir})",
+            resume=self.cfg.resume and r.root is not None and Path(r.root).exists(),
+            seed=self.cfg.seed,
+            reward_keys=list(self.keys),
+        )
+        _, info = self.vec_env.reset(seed=self.cfg.seed)
+        features = dataset_features(
+            self.vec_env.single_observation_space, self.vec_env.single_action_space, unbatch(info), False
+        )
+        self.task = str(self.vec_env.call("task_description")[0])
+        return open_dataset(self.record_cfg, features)
+
+    def _record(self, rollouts: list[Rollouts]) -> None:
+        from lerobot_indicator.data.recorder import write_episode
+
+        for r in rollouts:
+            for frames, actions in zip(r.dataset_frames, r.actions, strict=True):
+                write_episode(self.dataset, frames, list(actions), self.keys, self.task)
+                self.dataset.save_episode()
 
     # ---------------- resume state ----------------
     def _save_resume_state(self) -> None:
@@ -223,7 +254,12 @@ class OnlineTrainer:
             base = cycle_seed(self.cfg.seed, cycle) % 10**8 * 64 + r * n
             seeds = [base + i for i in range(n)]
             random_eps = 1.0 if warmup else None
-            rollouts.append(self._episodes(seeds, True, generator=generator, random_eps=random_eps))
+            rollouts.append(
+                self._episodes(
+                    seeds, True, generator=generator, random_eps=random_eps,
+                    keep_dataset_frames=self.dataset is not None,
+                )
+            )  # fmt: skip
         return rollouts
 
     def evaluate(self) -> dict[str, float]:
@@ -287,6 +323,8 @@ class OnlineTrainer:
                 for episode in r.episodes():
                     self.buffer.add_episode(*episode)
             self._append_replay(rollouts)
+            if self.dataset is not None:
+                self._record(rollouts)
             if cycle == 0 and cfg.policy.pretrained_path is None:
                 # No dataset statistics online: normalise inputs with those of the first episodes
                 # (saved with the weights, so a resumed or evaluated policy uses the same ones).
@@ -333,6 +371,9 @@ class OnlineTrainer:
             )
         bar.close()
         plot_learning_curve(self.out / METRICS_FILE, self.out / "learning_curve.png", title=cfg.job_name)
+        if self.dataset is not None and cfg.record.push_to_hub:
+            self.dataset.finalize()
+            self.dataset.push_to_hub(tags=["lerobot-indicator", "indicator-rewards", cfg.env.type])
         if cfg.policy.push_to_hub:
             self.policy.push_model_to_hub(cfg)
             self.processors.pre.push_to_hub(cfg.policy.repo_id)
@@ -340,6 +381,9 @@ class OnlineTrainer:
         return {**last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
 
     def close(self) -> None:
+        """Also on a crash: finalize the recorded dataset so every saved episode stays readable."""
+        if self.dataset is not None:
+            self.dataset.finalize()
         close_envs({self.cfg.env.type: {0: self.vec_env}})
 
 

@@ -16,6 +16,7 @@ import torch
 from lerobot.envs.utils import preprocess_observation
 from lerobot.utils.constants import ACTION
 
+from lerobot_indicator.data.features import observation_frame, unbatch
 from lerobot_indicator.keys import goal_key
 
 GT_ACHIEVED, GT_DESIRED, GT_DISTANCE = "gt_achieved_goal", "gt_desired_goal", "gt_distance"
@@ -41,6 +42,8 @@ class Rollouts:
     final_distance: np.ndarray  # (n,) ground-truth distance at the final step
     gt_achieved: np.ndarray | None  # (n, T + 1, g)
     gt_desired: np.ndarray | None  # (n, g)
+    # Per env, the T + 1 dataset frames (``observation_frame``) when asked for (``--record.*``).
+    dataset_frames: list[list[dict[str, np.ndarray]]] | None = None
 
     def episodes(self):
         """Yield ``(observations, actions, ground_truth)`` per episode, as the replay buffer takes them."""
@@ -91,23 +94,32 @@ def run_episodes(
     explore: bool,
     generator: torch.Generator | None = None,
     random_eps: float | None = None,
+    keep_dataset_frames: bool = False,
 ) -> Rollouts:
     """Run one episode per sub-env from ``reset(seed=seeds)`` for exactly ``horizon`` steps.
 
     ``explore`` uses the policy's behaviour policy (actor + Gaussian noise, random actions with
     probability ``random_eps``, the config's unless given: 1.0 for warm-up); otherwise the
-    deterministic actor, as in evaluation.
+    deterministic actor, as in evaluation. ``keep_dataset_frames`` also keeps every raw observation
+    as a LeRobotDataset frame, for writing the rollouts to a dataset.
     """
     policy.eval()
     obs, info = vec_env.reset(seed=seeds)
     frames: list[dict[str, np.ndarray]] = []
     actions, achieved = [], []
     desired = _info_array(info, GT_DESIRED)
-    distance = success = None
+    n_envs = vec_env.num_envs
+    dataset_frames = [[] for _ in range(n_envs)] if keep_dataset_frames else None
+
+    def keep_frames(obs: dict, info: dict) -> None:
+        for i in range(n_envs if keep_dataset_frames else 0):
+            dataset_frames[i].append(observation_frame(unbatch(obs, i), unbatch(info, i)))
+
     for t in range(horizon):
         batch = env_batch(obs, vec_env, processors.env_pre)
         frames.append({k: batch[k].cpu().numpy() for k in keys})
         achieved.append(_info_array(info, GT_ACHIEVED))
+        keep_frames(obs, info)
         policy_batch = processors.pre(batch)
         if explore:
             action = policy.select_exploration_action(
@@ -135,6 +147,7 @@ def run_episodes(
         final_obs, final_info = _stack_per_env(info["final_obs"]), info["final_info"]
     batch = env_batch(final_obs, vec_env, processors.env_pre)
     frames.append({k: batch[k].cpu().numpy() for k in keys})
+    keep_frames(final_obs, final_info)
     achieved.append(_info_array(final_info, GT_ACHIEVED))
     distance = _info_array(final_info, GT_DISTANCE)
     success = np.asarray(final_info.get("is_success", np.zeros(len(seeds), bool)), dtype=bool)
@@ -146,4 +159,5 @@ def run_episodes(
         final_distance=distance if distance is not None else np.full(len(seeds), np.nan, np.float32),
         gt_achieved=np.stack(achieved, axis=1) if has_gt else None,
         gt_desired=desired if has_gt else None,
+        dataset_frames=dataset_frames,
     )

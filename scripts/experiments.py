@@ -48,6 +48,14 @@ LABELS = {
     "indicator_filter": "Indicator+Filter",
     "indicator_balance_filter": "Indicator+Balance+Filter",
 }
+# Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
+STYLES = {
+    "oracle": ("tab:blue", "-"),
+    "indicator": ("tab:orange", "-"),
+    "indicator_balance": ("tab:green", "--"),
+    "indicator_filter": ("tab:red", ":"),
+    "indicator_balance_filter": ("tab:purple", "-."),
+}
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 
 
@@ -68,10 +76,11 @@ TASKS: dict[str, TaskPreset] = {
     ),
     "rope_state": TaskPreset(
         ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
-        3000,
+        1200,
         40,
         8,
-        200,
+        400,
+        10,
     ),
     "rope_rgbd": TaskPreset(["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 8, 400, 10),
 }
@@ -198,8 +207,9 @@ def plot(summary: dict, path: Path) -> None:
                     continue
                 x = np.array(res["env_steps"])
                 mean, std = (np.array(res["series"][key][s]) for s in ("mean", "std"))
-                ax.plot(x, mean, label=LABELS[method])
-                ax.fill_between(x, mean - std, mean + std, alpha=0.2)
+                color, dash = STYLES[method]
+                ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
+                ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
             ax.set_title(f"{task}: {label}")
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
@@ -244,6 +254,10 @@ def main() -> None:
         "device": cfg.device,
         "launch_wall_s": wall,
     }
+    previous = cfg.out / "summary.json"
+    if cfg.plot_only and previous.exists():  # keep the command and wall times of the runs themselves
+        old = json.loads(previous.read_text())["meta"]
+        meta = {**old, "replotted_with": meta["command"]}
     (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
     plot(summary, cfg.out / "comparison.png")
     (cfg.out / "table.md").write_text(table(summary) + "\n")

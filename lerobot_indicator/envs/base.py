@@ -63,7 +63,11 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         render_mode: str | None = "rgb_array",
         episode_length: int | None = None,
         eval_reward: str = "success",
+        epsilon: float = 0.05,
     ):
+        if epsilon <= 0:
+            raise ValueError(f"epsilon must be > 0, got {epsilon}")
+        self.epsilon = float(epsilon)  # success: gt_distance <= epsilon
         if obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type: unknown {obs_type!r}; expected one of {OBS_TYPES}")
         if render_mode not in (None, "rgb_array"):

@@ -77,35 +77,22 @@ class RopePushEnv(MujocoGoalEnv):
 
     def __init__(
         self,
-        obs_type: str = "state",
         camera: GoalCameraConfig | dict | None = None,
         end_effector: EndEffectorConfig | dict | None = None,
         fps: int = 2,
         epsilon: float = 0.1,
         goal_pushes: int = 2,
         cache_path: str | None = None,
-        render_mode: str | None = "rgb_array",
-        episode_length: int | None = None,
-        eval_reward: str = "success",
+        **kwargs,
     ):
-        if epsilon <= 0:
-            raise ValueError(f"epsilon must be > 0, got {epsilon}")
+        """``kwargs``: :class:`MujocoGoalEnv`'s (obs_type, render_mode, episode_length, eval_reward)."""
         if isinstance(camera, dict) or camera is None:
             camera = rope_camera_config(**(camera or {}))
         if isinstance(end_effector, dict):
             end_effector = EndEffectorConfig(**end_effector)
         end_effector = end_effector or rope_end_effector_config()
         self.push_config = push_config_for(end_effector, goal_pushes)
-        self.epsilon = float(epsilon)
-        super().__init__(
-            obs_type=obs_type,
-            camera=camera,
-            end_effector=end_effector,
-            fps=fps,
-            render_mode=render_mode,
-            episode_length=episode_length,
-            eval_reward=eval_reward,
-        )
+        super().__init__(camera=camera, end_effector=end_effector, fps=fps, epsilon=epsilon, **kwargs)
         self.sim = RopeSim(self.model, self.data, self.push_config)
         self.sim.reset_straight()
         n = self.push_config.geometry.n_links

@@ -28,31 +28,10 @@ class SawyerReachEnv(MujocoGoalEnv):
     task = "sawyer_reach"
     task_description = TASK_DESCRIPTION
 
-    def __init__(
-        self,
-        obs_type: str = "state",
-        camera=None,
-        end_effector=None,
-        fps: int = 20,
-        epsilon: float = 0.05,
-        light_render: bool = True,
-        render_mode: str | None = "rgb_array",
-        episode_length: int | None = None,
-        eval_reward: str = "success",
-    ):
-        if epsilon <= 0:
-            raise ValueError(f"epsilon must be > 0, got {epsilon}")
-        self.epsilon = float(epsilon)
+    def __init__(self, light_render: bool = True, epsilon: float = 0.05, **kwargs):
+        """``kwargs``: :class:`MujocoGoalEnv`'s (obs_type, camera, end_effector, fps, ...)."""
         self.light_render = light_render
-        super().__init__(
-            obs_type=obs_type,
-            camera=camera,
-            end_effector=end_effector,
-            fps=fps,
-            render_mode=render_mode,
-            episode_length=episode_length,
-            eval_reward=eval_reward,
-        )
+        super().__init__(epsilon=epsilon, **kwargs)
         m = self.model
         self._site = m.site(EE_SITE).id
         self._mocap = m.body(MOCAP_BODY).mocapid[0]

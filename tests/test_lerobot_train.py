@@ -16,41 +16,20 @@ EPISODES, T = 3, 6
 
 
 def make_tiny_reach_dataset(root: Path) -> Path:
-    """Three episodes of a 3-d point reaching a goal, with the conventions' keys (docs/conventions.md)."""
-    from lerobot.datasets import LeRobotDataset
+    """A few episodes of the real sawyer_reach task, recorded by our own recorder (docs/dataset_format.md):
+    what a user trains on, T + 1 frames per episode, ground truth included."""
+    from lerobot_indicator.data.recorder import RecordConfig, record
+    from lerobot_indicator.envs.configs import SawyerReachEnvConfig
 
-    vec = {"dtype": "float32", "shape": (3,), "names": ["x", "y", "z"]}
-    features = {
-        "observation.state": vec,
-        "observation.goal_state": vec,
-        "observation.gt_achieved_goal": vec,
-        "observation.gt_desired_goal": vec,
-        "action": vec,
-        "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
-        "next.done": {"dtype": "bool", "shape": (1,), "names": None},
-    }
-    ds = LeRobotDataset.create(REPO_ID, fps=10, features=features, root=root, use_videos=False)
-    rng = np.random.default_rng(0)
-    for _ in range(EPISODES):
-        pos, goal = rng.uniform(-0.2, 0.2, 3).astype(np.float32), rng.uniform(-0.2, 0.2, 3).astype(np.float32)
-        for t in range(T):
-            action = rng.uniform(-1, 1, 3).astype(np.float32)
-            dist = float(np.linalg.norm(pos - goal))
-            ds.add_frame(
-                {
-                    "observation.state": pos,
-                    "observation.goal_state": goal,
-                    "observation.gt_achieved_goal": pos,
-                    "observation.gt_desired_goal": goal,
-                    "action": action,
-                    "next.reward": np.array([1.0 if dist <= 0.1 else -1.0], dtype=np.float32),
-                    "next.done": np.array([t == T - 1]),
-                    "task": "reach",
-                }
-            )
-            pos = (pos + 0.05 * action).astype(np.float32)
-        ds.save_episode()
-    ds.finalize()
+    cfg = RecordConfig(
+        env=SawyerReachEnvConfig(episode_length=T),
+        repo_id=REPO_ID,
+        root=root,
+        policy="noisy_scripted",
+        num_episodes=EPISODES,
+        image_writer_threads=0,
+    )
+    record(cfg)
     return root
 
 

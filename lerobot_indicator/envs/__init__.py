@@ -17,22 +17,15 @@ from lerobot_indicator.envs.configs import (
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 
 SAWYER_REACH_ID = f"{GYM_NAMESPACE}/{SAWYER_REACH_TASK}"
-
-if SAWYER_REACH_ID not in gym.registry:
-    gym.register(
-        id=SAWYER_REACH_ID,
-        entry_point="lerobot_indicator.envs.sawyer_reach:SawyerReachEnv",
-        max_episode_steps=25,
-    )
-
 ROPE_PUSH_ID = f"{GYM_NAMESPACE}/{ROPE_PUSH_TASK}"
 
-if ROPE_PUSH_ID not in gym.registry:
-    gym.register(
-        id=ROPE_PUSH_ID,
-        entry_point="lerobot_indicator.envs.rope_push:RopePushEnv",
-        max_episode_steps=3,
-    )
+# (gym id, env class, default horizon T): the paper's 25 steps for reach, 3 pushes for rope.
+for _gym_id, _entry_point, _horizon in (
+    (SAWYER_REACH_ID, "lerobot_indicator.envs.sawyer_reach:SawyerReachEnv", 25),
+    (ROPE_PUSH_ID, "lerobot_indicator.envs.rope_push:RopePushEnv", 3),
+):
+    if _gym_id not in gym.registry:
+        gym.register(id=_gym_id, entry_point=_entry_point, max_episode_steps=_horizon)
 
 __all__ = [
     "ROPE_PUSH_ID",

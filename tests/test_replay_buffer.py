@@ -58,18 +58,6 @@ def test_fifo_overwrites_oldest_episode():
     assert sorted(set(buf.obs["observation.state"][:, 0, 0].astype(int))) == [2, 3, 4]
 
 
-def test_save_load_round_trip(tmp_path):
-    buf = EpisodeReplayBuffer(capacity_transitions=4 * T, horizon=T)
-    for e in range(6):
-        buf.add_episode(*_episode(e))
-    buf.save(tmp_path / "buf.npz")
-    loaded = EpisodeReplayBuffer.load(tmp_path / "buf.npz")
-    a, b = buf.sample(64, np.random.default_rng(3)), loaded.sample(64, np.random.default_rng(3))
-    for key in a["obs"]:
-        assert np.array_equal(a["obs"][key], b["obs"][key])
-    assert (loaded.next_slot, loaded.total_episodes_added) == (buf.next_slot, buf.total_episodes_added)
-
-
 def test_bad_episodes_are_rejected():
     buf = EpisodeReplayBuffer(capacity_transitions=4 * T, horizon=T)
     obs, actions, gt = _episode(0)

@@ -7,13 +7,13 @@ LeRobot's ``preprocess_observation`` and the env processors, exactly as eval and
 them, so there is one conversion path and a dataset can seed the buffer. To keep a 5e3-transition
 visual buffer small they are packed losslessly: RGB in [0, 1] that is k/255 goes back to uint8,
 integer-valued depth to uint16 (checked on every episode; a key that stops packing exactly is
-widened to float32). Goal observations are constant within an episode and stored once per episode.
+widened to float32). Goal observations are constant within an episode and stored once per episode. Resuming a run does not save this buffer: the
+online trainer rebuilds it from its per-cycle episode chunks (``online.py``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 
 import numpy as np
 
@@ -193,43 +193,3 @@ class EpisodeReplayBuffer:
             if keep:
                 stats[key] = {k: v.reshape(v.shape[2:]) for k, v in stats[key].items()}
         return stats
-
-    # ---- persistence (resume) ----
-    def save(self, path: Path) -> None:
-        """Write atomically (tmp file + rename): a crash mid-write never corrupts the last copy."""
-        n = self.num_episodes
-        arrays = {f"obs/{k}": v.data[:n] for k, v in self.obs.items()}
-        arrays.update({f"goal/{k}": v.data[:n] for k, v in self.goals.items()})
-        arrays.update({f"scale/{k}": np.float32(v.scale) for k, v in {**self.obs, **self.goals}.items()})
-        if self.actions is not None:
-            arrays["actions"] = self.actions[:n]
-        if self.gt_achieved is not None:
-            arrays["gt_achieved"], arrays["gt_desired"] = self.gt_achieved[:n], self.gt_desired[:n]
-        meta = np.array([self.horizon, self.capacity, n, self.next_slot, self.total_episodes_added])
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(tmp, meta=meta, **arrays)
-        tmp.replace(path)
-
-    @classmethod
-    def load(cls, path: Path) -> EpisodeReplayBuffer:
-        with np.load(path) as data:
-            horizon, capacity, n, next_slot, total = (int(x) for x in data["meta"])
-            buf = cls(capacity * horizon, horizon)
-            if n:
-                buf.actions = np.zeros((capacity, horizon, data["actions"].shape[-1]), np.float32)
-                buf.actions[:n] = data["actions"]
-                for prefix, store in (("obs/", buf.obs), ("goal/", buf.goals)):
-                    for name in (f for f in data.files if f.startswith(prefix)):
-                        key, stored = name[len(prefix) :], data[name]
-                        packed = _PackedArray.__new__(_PackedArray)
-                        packed.dtype, packed.scale = stored.dtype, float(data[f"scale/{key}"])
-                        packed.data = np.zeros((capacity, *stored.shape[1:]), stored.dtype)
-                        packed.data[:n] = stored
-                        store[key] = packed
-                if "gt_achieved" in data.files:
-                    buf.gt_achieved = np.zeros((capacity, *data["gt_achieved"].shape[1:]), np.float32)
-                    buf.gt_desired = np.zeros((capacity, *data["gt_desired"].shape[1:]), np.float32)
-                    buf.gt_achieved[:n], buf.gt_desired[:n] = data["gt_achieved"], data["gt_desired"]
-        buf.num_episodes, buf.next_slot, buf.total_episodes_added = n, next_slot, total
-        return buf

@@ -253,14 +253,6 @@ def run_ours(method: str, seed: int, args: argparse.Namespace) -> dict:
 # ----------------------------------------------------------------------------------------------------------
 # update throughput, one process, interleaved
 # ----------------------------------------------------------------------------------------------------------
-def foreach_soft_update(policy) -> None:
-    """The proposed ``indicator_core.soft_update``: one ``torch._foreach_lerp_`` per network pair."""
-    tau = policy.config.tau
-    with torch.no_grad():
-        for target, online in ((policy.target_actor, policy.actor), (policy.target_critic, policy.critic)):
-            torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), 1.0 - tau)
-
-
 def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, list[float]]:
     """Seconds per block of ``updates_per_block`` gradient steps for each arm (see ``bench_updates``)."""
     n = args.updates_per_block
@@ -274,26 +266,14 @@ def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, li
                 for episode in r.episodes():
                     trainer.buffer.add_episode(*episode)
         rng = np.random.default_rng(0)
-        policy, adam = trainer.policy, trainer.optimizer
-        fused = torch.optim.Adam(policy.get_optim_params(), lr=args.lr, fused=True)
-        plain_update = policy.update
 
         def ours() -> None:
             trainer.optimise(rng, g)
-
-        def ours_proposed() -> None:
-            trainer.optimizer, policy.update = fused, lambda: foreach_soft_update(policy)
-            try:
-                trainer.optimise(rng, g)
-            finally:
-                trainer.optimizer, policy.update = adam, plain_update
 
         def sb3_train() -> None:
             sb3.train(gradient_steps=n, batch_size=args.batch_size)
 
         arms = {"ours": ours, "sb3": sb3_train}
-        if method == "ours_indicator":
-            arms["ours_proposed"] = ours_proposed
         names = list(arms)
         for name in names:  # warm-up
             arms[name]()
@@ -311,8 +291,7 @@ def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, li
 def bench_updates(args: argparse.Namespace) -> dict:
     """Gradient updates/s at batch 256 incl. replay sampling (what each library's train step does), both
     buffers filled with the same number of random-action episodes; blocks interleaved, the order of the arms
-    rotating every block. ``ours_proposed`` = ours with the fix proposed in the report (fused Adam, foreach
-    target update), applied here by swapping the trainer's optimizer and ``policy.update``."""
+    rotating every block."""
     n = args.updates_per_block
     sb3 = make_sb3(0, args, learning_starts=10**9)
     sb3.learn(total_timesteps=args.fill_episodes * HORIZON)  # random actions, no training
@@ -411,14 +390,13 @@ def plot(record: dict, png: Path) -> None:
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=7)
     upd = record["update_throughput"]
-    names = ["SB3 DDPG+HER", "ours oracle", "ours indicator", "ours indicator\n+ proposed fix"]
+    names = ["SB3 DDPG+HER", "ours oracle", "ours indicator"]
     vals = [
         upd["ours_indicator"]["sb3_updates_per_s"],
         upd["ours_oracle"]["ours_updates_per_s"],
         upd["ours_indicator"]["ours_updates_per_s"],
-        upd["ours_indicator"]["ours_proposed_updates_per_s"],
     ]
-    axes[2].bar(names, vals, color=[colors[m] for m in METHODS] + ["tab:orange"])
+    axes[2].bar(names, vals, color=[colors[m] for m in METHODS])
     axes[2].set_ylabel("gradient updates/s")
     axes[2].set_title(f"batch {upd['batch_size']}, CPU, incl. replay sampling", fontsize=9)
     for i, v in enumerate(vals):

@@ -268,3 +268,15 @@ def test_learns_goal_reaching_from_random_walks_with_indicator_rewards(one_threa
         policy.update()
     assert before < 0.5
     assert success_rate() >= 0.9
+
+
+def test_cpu_tanh_matches_torch_tanh_and_its_gradient():
+    from lerobot_indicator.policy.networks_indicator_ddpg import tanh
+
+    x = torch.cat([torch.linspace(-20, 20, 4001), torch.tensor([0.0, 1e-30, -1e-30])]).requires_grad_()
+    y = tanh(x)
+    exact = torch.tanh(x.detach().double())
+    torch.testing.assert_close(y.double(), exact, atol=3e-7, rtol=0)
+    assert y.abs().max() <= 1.0
+    (grad,) = torch.autograd.grad(y, x, torch.ones_like(y))
+    torch.testing.assert_close(grad.double(), 1 - exact**2, atol=1e-6, rtol=0)

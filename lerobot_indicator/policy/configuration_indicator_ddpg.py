@@ -3,12 +3,24 @@
 from dataclasses import dataclass, field
 
 from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
-from lerobot.optim import AdamConfig
+from lerobot.optim import AdamConfig, OptimizerConfig
 from lerobot.utils.constants import ACTION
 
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 
 REWARD_MODES = ("indicator", "oracle")
+
+
+@OptimizerConfig.register_subclass("fused_adam")
+@dataclass
+class FusedAdamConfig(AdamConfig):
+    """LeRobot's ``adam`` with torch's fused kernel (``fused=False`` gives plain ``adam``).
+
+    ``AdamConfig.build`` passes every field to ``torch.optim.Adam``. On CPU torch's default Adam loops over
+    the tensors one by one; the fused kernel made a state-based update ~10% faster (docs/results/vs_sb3.json).
+    """
+
+    fused: bool = True
 
 
 @PreTrainedConfig.register_subclass("indicator_ddpg")
@@ -211,10 +223,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     def reward_delta_indices(self) -> None:
         return None
 
-    def get_optimizer_preset(self) -> AdamConfig:
+    def get_optimizer_preset(self) -> FusedAdamConfig:
         # No gradient clipping: the paper and baselines' HER do not clip, and a global norm clip over the
         # concatenated actor+critic parameters would couple their step sizes.
-        return AdamConfig(lr=self.learning_rate, grad_clip_norm=0.0)
+        return FusedAdamConfig(lr=self.learning_rate, grad_clip_norm=0.0)
 
     def get_scheduler_preset(self) -> None:
         return None

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
-from torch.func import functional_call
 
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic
 
 ACTION = "action"
 NEXT = "next."
@@ -140,25 +140,20 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
 
 
 def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
-    """target <- tau * target + (1 - tau) * online (paper: target network smoothing 0.98)."""
+    """target <- tau * target + (1 - tau) * online (paper: target network smoothing 0.98).
+
+    One ``_foreach_lerp_`` over all parameters (torch's own EMA helpers use it): a per-tensor loop costs ~4%
+    of a state-based update on CPU."""
     with torch.no_grad():
-        for t, o in zip(target.parameters(), online.parameters(), strict=True):
-            t.lerp_(o, 1.0 - tau)
+        torch._foreach_lerp_(list(target.parameters()), list(online.parameters()), 1.0 - tau)
         for t, o in zip(target.buffers(), online.buffers(), strict=True):
             t.copy_(o)
-
-
-def frozen_call(module: nn.Module, *args: Tensor) -> Tensor:
-    """Call ``module`` with detached parameters: gradients reach the inputs, never the module's weights."""
-    params = {name: p.detach() for name, p in module.named_parameters()}
-    buffers = dict(module.named_buffers())
-    return functional_call(module, {**params, **buffers}, args)
 
 
 def indicator_ddpg_loss(
     batch: dict[str, Tensor],
     actor: nn.Module,
-    critic: nn.Module,
+    critic: Critic,
     target_actor: nn.Module,
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
@@ -168,7 +163,8 @@ def indicator_ddpg_loss(
 
     Returns ``critic_loss + actor_loss``: the critic gets gradients only from the TD loss (targets and the
     filter's Q are computed without gradients) and the actor only from -Q(o, g, pi(o, g)) + action_l2 *
-    pi^2 (evaluated through a parameter-detached critic), so one backward and one optimizer step over both
+    pi^2 (evaluated through the critic's head with detached weights, on the same detached encoding of
+    (o, g) as Q(o, g, a)), so one backward and one optimizer step over both
     parameter sets equals separate actor and critic updates.
     """
     keys = config.observation_keys
@@ -194,7 +190,8 @@ def indicator_ddpg_loss(
         success = ground_truth_success(batch[GT_NEXT_ACHIEVED], gt_goal, config.oracle_epsilon)
         reward = torch.where(success, config.positive_reward, config.negative_reward)
 
-    q = critic(obs, goal, action)
+    features = critic.encode(obs, goal)
+    q = critic.head(features, action)
     with torch.no_grad():
         next_q = target_critic(next_obs, goal, target_actor(next_obs, goal))
         # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
@@ -208,7 +205,7 @@ def indicator_ddpg_loss(
     critic_loss = masked_mean((q - target) ** 2, keep_f)
 
     pi = actor(obs, goal)
-    q_pi = frozen_call(critic, obs, goal, pi)
+    q_pi = critic.head(features.detach(), pi, frozen=True)
     actor_loss = masked_mean(-q_pi + config.action_l2 * (pi**2).mean(dim=1), keep_f)
 
     valid_f = valid.float()

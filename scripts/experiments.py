@@ -76,11 +76,11 @@ TASKS: dict[str, TaskPreset] = {
     ),
     "rope_state": TaskPreset(
         ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
-        1200,
+        6000,
         40,
         8,
         400,
-        10,
+        20,
     ),
     "rope_rgbd": TaskPreset(["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 8, 400, 10),
 }
@@ -187,7 +187,14 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
     return result
 
 
-def plot(summary: dict, path: Path) -> None:
+def start_distances(out: Path, tasks: list[str]) -> dict[str, float]:
+    """Per task, the eval goals' distance at reset (``scripts/start_distance.py --out=<out>/start_distance_<task>
+    .json``), if measured: what a policy that never moves scores, drawn as a reference line."""
+    files = {task: out / f"start_distance_{task}.json" for task in tasks}
+    return {t: json.loads(f.read_text())["start_distance_mean"] for t, f in files.items() if f.exists()}
+
+
+def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -> None:
     """One row per task: success rate, final distance, and the indicator reward's accuracy / FN rate."""
     panels = (
         ("eval_success_rate", "success rate"),
@@ -210,6 +217,10 @@ def plot(summary: dict, path: Path) -> None:
                 color, dash = STYLES[method]
                 ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
                 ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
+            if key == "eval_final_distance" and task in (reference or {}):
+                ax.axhline(
+                    reference[task], color="grey", ls=":", lw=1.5, label="no movement (start distance)"
+                )
             ax.set_title(f"{task}: {label}")
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
@@ -259,7 +270,7 @@ def main() -> None:
         old = json.loads(previous.read_text())["meta"]
         meta = {**old, "replotted_with": meta["command"]}
     (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
-    plot(summary, cfg.out / "comparison.png")
+    plot(summary, cfg.out / "comparison.png", start_distances(cfg.out, cfg.tasks))
     (cfg.out / "table.md").write_text(table(summary) + "\n")
     print(table(summary))
 

@@ -142,3 +142,56 @@ def test_online_rollouts_are_recorded_as_a_lerobot_dataset(tmp_path, monkeypatch
     for t in range(horizon):
         hit = torch.equal(ds[t + 1]["observation.state"], ds[t]["observation.goal_state"])
         assert ds[t]["next.reward"].item() == (1.0 if hit else -1.0)
+
+
+KILL_AFTER_RECORDING = """
+import sys
+from lerobot_indicator.training import online
+
+calls = 0
+save = online.OnlineTrainer._save_resume_state
+
+
+def killed_on_second_save(self):
+    global calls
+    calls += 1
+    if calls == 2:  # cycle 1's episodes are recorded, its resume state is not saved yet
+        raise KeyboardInterrupt
+    save(self)
+
+
+online.OnlineTrainer._save_resume_state = killed_on_second_save
+sys.argv = ["lerobot-indicator-train", *sys.argv[1:]]
+online.main()
+"""
+
+
+def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch):
+    """Interrupted after writing a cycle's episodes but before its resume state: the resumed run replays
+    that cycle and must not record it again. The dataset ends equal to an uninterrupted run's."""
+    from lerobot.datasets import LeRobotDataset
+
+    def record_args(name: str) -> list[str]:
+        root = tmp_path / f"{name}_dataset"
+        return [*ENVS["sawyer_reach"], f"--record.repo_id=local/{name}", f"--record.root={root}"]
+
+    _train(tmp_path / "full", *record_args("full"), "--steps=15")
+    split = [f"--output_dir={tmp_path / 'split'}", *TINY, *record_args("split"), "--steps=15"]
+    proc = subprocess.run(
+        [sys.executable, "-c", KILL_AFTER_RECORDING, *split], capture_output=True, text=True, env=_env()
+    )
+    assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr, proc.stderr[-2000:]
+    _train(tmp_path / "split", *record_args("split"), "--steps=15", "--resume=true")
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    full, split_ds = (
+        LeRobotDataset(f"local/{n}", root=tmp_path / f"{n}_dataset", video_backend="pyav")
+        for n in ("full", "split")
+    )
+    assert full.num_episodes == split_ds.num_episodes == 3
+    assert len(full) == len(split_ds)
+    for i in range(len(full)):
+        a, b = full[i], split_ds[i]
+        for key in ("action", "observation.state", "observation.goal_state", "episode_index"):
+            assert torch.equal(a[key], b[key]), (i, key)
+    assert not (tmp_path / "split_dataset" / ".recording").exists()  # no journal after a clean finish

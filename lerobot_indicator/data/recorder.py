@@ -140,6 +140,13 @@ def _resume(cfg: RecordConfig) -> LeRobotDataset:
     )
 
 
+def checkpoint_dataset(cfg: RecordConfig, dataset: LeRobotDataset) -> LeRobotDataset:
+    """Finalize, journal that consistent state (a later kill rolls back to it), reopen for more episodes."""
+    dataset.finalize()
+    write_checkpoint(cfg.root, dataset.meta.total_episodes)
+    return _resume(cfg)
+
+
 def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
     root = cfg.root
     _check_root(cfg)
@@ -235,9 +242,7 @@ def _record_episodes(cfg: RecordConfig, vec_env, actions, dataset: LeRobotDatase
                 time.monotonic() - last_checkpoint >= cfg.checkpoint_every_s
                 and episode + 1 < first + cfg.num_episodes
             ):
-                dataset.finalize()
-                write_checkpoint(cfg.root, dataset.meta.total_episodes)
-                dataset = _resume(cfg)
+                dataset = checkpoint_dataset(cfg, dataset)
                 last_checkpoint = time.monotonic()
     except BaseException:
         if not saving and dataset.has_pending_frames():

@@ -32,6 +32,7 @@ from lerobot.utils.utils import init_logging
 from safetensors.torch import load_file, save_file
 from tqdm import tqdm
 
+from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
@@ -55,6 +56,7 @@ class Progress:
     episodes: int = 0
     wall_time_s: float = 0.0
     seeded_episodes: int = 0  # from --dataset, before any rollout
+    recorded_episodes: int = 0  # in the --record dataset's last checkpoint when this state was saved
     # (file name, global index of its first episode) of the episode chunks still needed to rebuild the buffer
     replay_files: list[tuple[str, int]] = field(default_factory=list)
 
@@ -147,24 +149,43 @@ class OnlineTrainer:
             repo_id=r.repo_id,
             root=r.root,
             policy=f"indicator_ddpg online ({self.cfg.output_dir})",
-            resume=self.cfg.resume and r.root is not None and Path(r.root).exists(),
             seed=self.cfg.seed,
             reward_keys=list(self.keys),
         )
+        self.record_cfg.resume = self.cfg.resume and self.record_cfg.root.exists()
         _, info = self.vec_env.reset(seed=self.cfg.seed)
         features = dataset_features(
             self.vec_env.single_observation_space, self.vec_env.single_action_space, unbatch(info), False
         )
         self.task = str(self.vec_env.call("task_description")[0])
-        return open_dataset(self.record_cfg, features)
+        dataset = open_dataset(self.record_cfg, features)  # rolls back to the last checkpoint if killed
+        write_checkpoint(self.record_cfg.root, dataset.meta.total_episodes)
+        return dataset
 
-    def _record(self, rollouts: list[Rollouts]) -> None:
-        from lerobot_indicator.data.recorder import write_episode
+    def _record(self, rollouts: list[Rollouts], skip: int) -> None:
+        """Write this cycle's episodes but the first ``skip``, then checkpoint the dataset *before* the
+        resume state counts the cycle as done. A kill between the two leaves ``skip`` > 0 on resume: the
+        replayed cycle's first episodes are already recorded (rollouts replay exactly)."""
+        from lerobot_indicator.data.recorder import checkpoint_dataset, write_episode
 
-        for r in rollouts:
-            for frames, actions in zip(r.dataset_frames, r.actions, strict=True):
-                write_episode(self.dataset, frames, list(actions), self.keys, self.task)
-                self.dataset.save_episode()
+        episodes = [e for r in rollouts for e in zip(r.dataset_frames, r.actions, strict=True)]
+        for frames, actions in episodes[skip:]:
+            write_episode(self.dataset, frames, list(actions), self.keys, self.task)
+            self.dataset.save_episode()
+        self.dataset = checkpoint_dataset(self.record_cfg, self.dataset)
+        self.progress.recorded_episodes = self.dataset.meta.total_episodes
+
+    def _episodes_recorded_ahead(self) -> int:
+        """Episodes the dataset holds beyond the resume state: recorded by the cycle about to be replayed."""
+        ahead = self.dataset.meta.total_episodes - self.progress.recorded_episodes
+        per_cycle = self.rounds_per_cycle * self.cfg.online.n_envs
+        if not 0 <= ahead <= per_cycle:
+            raise ValueError(
+                f"the --record dataset at {self.record_cfg.root} has {self.dataset.meta.total_episodes} "
+                f"episodes but this run's resume state expects {self.progress.recorded_episodes} (+ at most "
+                f"{per_cycle} of the cycle being replayed): it was changed outside this run"
+            )
+        return ahead
 
     # ---------------- resume state ----------------
     def _save_resume_state(self) -> None:
@@ -311,6 +332,7 @@ class OnlineTrainer:
         elif cfg.dataset is not None:
             self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
             self.progress.episodes = self.progress.seeded_episodes
+        record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
         last_eval: dict[str, float] = {}
         bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
         while self.progress.cycle < self.n_cycles:
@@ -324,7 +346,8 @@ class OnlineTrainer:
                     self.buffer.add_episode(*episode)
             self._append_replay(rollouts)
             if self.dataset is not None:
-                self._record(rollouts)
+                self._record(rollouts, record_skip)
+                record_skip = 0
             if cycle == 0 and cfg.policy.pretrained_path is None:
                 # No dataset statistics online: normalise inputs with those of the first episodes
                 # (saved with the weights, so a resumed or evaluated policy uses the same ones).
@@ -371,9 +394,11 @@ class OnlineTrainer:
             )
         bar.close()
         plot_learning_curve(self.out / METRICS_FILE, self.out / "learning_curve.png", title=cfg.job_name)
-        if self.dataset is not None and cfg.record.push_to_hub:
+        if self.dataset is not None:
             self.dataset.finalize()
-            self.dataset.push_to_hub(tags=["lerobot-indicator", "indicator-rewards", cfg.env.type])
+            clear_checkpoint(self.record_cfg.root)  # complete and consistent: nothing to roll back to
+            if cfg.record.push_to_hub:
+                self.dataset.push_to_hub(tags=["lerobot-indicator", "indicator-rewards", cfg.env.type])
         if cfg.policy.push_to_hub:
             self.policy.push_model_to_hub(cfg)
             self.processors.pre.push_to_hub(cfg.policy.repo_id)
@@ -381,7 +406,8 @@ class OnlineTrainer:
         return {**last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
 
     def close(self) -> None:
-        """Also on a crash: finalize the recorded dataset so every saved episode stays readable."""
+        """Also on a crash: finalize the recorded dataset so every saved episode stays readable (its
+        checkpoint journal stays, so ``--resume=true`` rolls it back to the resume state)."""
         if self.dataset is not None:
             self.dataset.finalize()
         close_envs({self.cfg.env.type: {0: self.vec_env}})

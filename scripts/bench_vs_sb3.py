@@ -518,7 +518,9 @@ def main() -> None:
         ind = record["summary"].get("ours_indicator", {}).get("env_steps_to_90", {}).get("mean")
         record["ratio_env_steps_to_90_indicator_over_sb3"] = ind / sb3 if sb3 and ind else None
     args.out_dir.mkdir(parents=True, exist_ok=True)
-    (args.out_dir / "vs_sb3.json").write_text(json.dumps(record, indent=2) + "\n")
+    # --skip-training records only the update benchmark: its own file, so it never replaces a full run.
+    name = "vs_sb3.json" if runs else "vs_sb3_updates.json"
+    (args.out_dir / name).write_text(json.dumps(record, indent=2) + "\n")
     if runs:
         plot(record, args.out_dir / "vs_sb3.png")
     print(json.dumps(record["summary"], indent=1))

@@ -144,45 +144,61 @@ def test_online_rollouts_are_recorded_as_a_lerobot_dataset(tmp_path, monkeypatch
         assert ds[t]["next.reward"].item() == (1.0 if hit else -1.0)
 
 
-KILL_AFTER_RECORDING = """
-import sys
+KILLED_AT_CALL = """
+import os, sys
 from lerobot_indicator.training import online
 
-calls = 0
-save = online.OnlineTrainer._save_resume_state
+method, call_index = os.environ["KILL_AT"].split(":")
+original, calls = getattr(online.OnlineTrainer, method), []
 
 
-def killed_on_second_save(self):
-    global calls
-    calls += 1
-    if calls == 2:  # cycle 1's episodes are recorded, its resume state is not saved yet
+def killed(self, *args):
+    calls.append(1)
+    if len(calls) == int(call_index):
         raise KeyboardInterrupt
-    save(self)
+    return original(self, *args)
 
 
-online.OnlineTrainer._save_resume_state = killed_on_second_save
+setattr(online.OnlineTrainer, method, killed)
 sys.argv = ["lerobot-indicator-train", *sys.argv[1:]]
 online.main()
 """
 
 
-def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch):
-    """Interrupted after writing a cycle's episodes but before its resume state: the resumed run replays
-    that cycle and must not record it again. The dataset ends equal to an uninterrupted run's."""
+@pytest.mark.parametrize(
+    ("checkpoint_every_s", "kill_at"),
+    [
+        # Cycle 1's episodes are recorded and checkpointed, its resume state is not saved: the resumed run
+        # replays cycle 1 and must skip the episode the dataset already has.
+        ("0", "_save_resume_state:2"),
+        # Dataset checkpoint + resume state only after cycle 0; killed while training cycle 2: the dataset
+        # rolls back to its checkpoint and cycles 1-2 are replayed and recorded once.
+        ("3600", "optimise:3"),
+    ],
+)
+def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoint_every_s, kill_at):
+    """A run killed with --record and resumed ends with the same dataset as an uninterrupted run."""
     from lerobot.datasets import LeRobotDataset
 
     def record_args(name: str) -> list[str]:
         root = tmp_path / f"{name}_dataset"
-        return [*ENVS["sawyer_reach"], f"--record.repo_id=local/{name}", f"--record.root={root}"]
+        return [
+            *ENVS["sawyer_reach"],
+            f"--record.repo_id=local/{name}",
+            f"--record.root={root}",
+            f"--record.checkpoint_every_s={checkpoint_every_s}",
+        ]
 
     _train(tmp_path / "full", *record_args("full"), "--steps=15")
     split = [f"--output_dir={tmp_path / 'split'}", *TINY, *record_args("split"), "--steps=15"]
     proc = subprocess.run(
-        [sys.executable, "-c", KILL_AFTER_RECORDING, *split], capture_output=True, text=True, env=_env()
+        [sys.executable, "-c", KILLED_AT_CALL, *split],
+        capture_output=True,
+        text=True,
+        env={**_env(), "KILL_AT": kill_at},
     )
     assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr, proc.stderr[-2000:]
     _train(tmp_path / "split", *record_args("split"), "--steps=15", "--resume=true")
-
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     full, split_ds = (
         LeRobotDataset(f"local/{n}", root=tmp_path / f"{n}_dataset", video_backend="pyav")

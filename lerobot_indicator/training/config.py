@@ -47,6 +47,9 @@ class RecordConfig:
     repo_id: str | None = None
     root: str | None = None
     push_to_hub: bool = False
+    # Seconds between dataset checkpoints (finalize + journal + reopen; each starts new files). The run's
+    # resume state is saved at these checkpoints only, so the two always agree: a kill replays <= this much.
+    checkpoint_every_s: float = 30.0
 
 
 @dataclass
@@ -90,6 +93,10 @@ class OnlineTrainConfig(HubMixin):
         for name in ("n_envs", "episodes_per_cycle", "updates_per_cycle", "eval_episodes"):
             if getattr(o, name) < 1:
                 raise ValueError(f"--online.{name} must be >= 1, got {getattr(o, name)}")
+        if self.record.checkpoint_every_s < 0:
+            raise ValueError(
+                f"--record.checkpoint_every_s must be >= 0, got {self.record.checkpoint_every_s}"
+            )
         if self.steps < o.updates_per_cycle:
             raise ValueError(f"--steps={self.steps} is less than one cycle (--online.updates_per_cycle)")
         if not self.job_name:

@@ -162,28 +162,41 @@ class OnlineTrainer:
         write_checkpoint(self.record_cfg.root, dataset.meta.total_episodes)
         return dataset
 
-    def _record(self, rollouts: list[Rollouts], skip: int) -> None:
-        """Write this cycle's episodes but the first ``skip``, then checkpoint the dataset *before* the
-        resume state counts the cycle as done. A kill between the two leaves ``skip`` > 0 on resume: the
-        replayed cycle's first episodes are already recorded (rollouts replay exactly)."""
-        from lerobot_indicator.data.recorder import checkpoint_dataset, write_episode
+    def _record(self, rollouts: list[Rollouts]) -> None:
+        """Write this cycle's episodes, but not those a replayed cycle already recorded before a kill."""
+        from lerobot_indicator.data.recorder import write_episode
 
         episodes = [e for r in rollouts for e in zip(r.dataset_frames, r.actions, strict=True)]
+        skip = min(self._record_skip, len(episodes))
+        self._record_skip -= skip
         for frames, actions in episodes[skip:]:
             write_episode(self.dataset, frames, list(actions), self.keys, self.task)
             self.dataset.save_episode()
-        self.dataset = checkpoint_dataset(self.record_cfg, self.dataset)
-        self.progress.recorded_episodes = self.dataset.meta.total_episodes
+
+    def _save_state_if_due(self, is_last: bool) -> None:
+        """The resume state, every cycle; with --record only at a dataset checkpoint, taken just before it.
+
+        A kill between the two leaves the dataset ahead of the state: ``_record`` then skips the replayed
+        episodes it already holds (rollouts replay exactly)."""
+        if self.dataset is not None:
+            due = time.monotonic() - self._record_checkpoint_t >= self.cfg.record.checkpoint_every_s
+            if not (due or is_last):
+                return
+            from lerobot_indicator.data.recorder import checkpoint_dataset
+
+            self.dataset = checkpoint_dataset(self.record_cfg, self.dataset)
+            self.progress.recorded_episodes = self.dataset.meta.total_episodes
+            self._record_checkpoint_t = time.monotonic()
+        self._save_resume_state()
 
     def _episodes_recorded_ahead(self) -> int:
-        """Episodes the dataset holds beyond the resume state: recorded by the cycle about to be replayed."""
+        """Episodes the dataset holds beyond the resume state: recorded by cycles about to be replayed."""
         ahead = self.dataset.meta.total_episodes - self.progress.recorded_episodes
-        per_cycle = self.rounds_per_cycle * self.cfg.online.n_envs
-        if not 0 <= ahead <= per_cycle:
+        if ahead < 0:
             raise ValueError(
                 f"the --record dataset at {self.record_cfg.root} has {self.dataset.meta.total_episodes} "
-                f"episodes but this run's resume state expects {self.progress.recorded_episodes} (+ at most "
-                f"{per_cycle} of the cycle being replayed): it was changed outside this run"
+                f"episodes but this run's resume state expects {self.progress.recorded_episodes}: it was "
+                "changed outside this run"
             )
         return ahead
 
@@ -332,7 +345,8 @@ class OnlineTrainer:
         elif cfg.dataset is not None:
             self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
             self.progress.episodes = self.progress.seeded_episodes
-        record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
+        self._record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
+        self._record_checkpoint_t = -math.inf  # the first cycle always leaves a resume state
         last_eval: dict[str, float] = {}
         bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
         while self.progress.cycle < self.n_cycles:
@@ -346,8 +360,7 @@ class OnlineTrainer:
                     self.buffer.add_episode(*episode)
             self._append_replay(rollouts)
             if self.dataset is not None:
-                self._record(rollouts, record_skip)
-                record_skip = 0
+                self._record(rollouts)
             if cycle == 0 and cfg.policy.pretrained_path is None:
                 # No dataset statistics online: normalise inputs with those of the first episodes
                 # (saved with the weights, so a resumed or evaluated policy uses the same ones).
@@ -385,7 +398,7 @@ class OnlineTrainer:
                 or (cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq)
             ):
                 self.save_checkpoint()
-            self._save_resume_state()
+            self._save_state_if_due(is_last)
             bar.update(o.updates_per_cycle)
             bar.set_postfix(
                 env_steps=self.progress.env_steps,

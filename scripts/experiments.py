@@ -166,7 +166,14 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
             continue
         n = min(len(r) for r in runs)
         series = {}
-        for key in ("eval_success_rate", "eval_final_distance", "reward_accuracy", "false_negative_rate"):
+        for key in (
+            "eval_success_rate",
+            "eval_final_distance",
+            "reward_accuracy",
+            "false_negative_rate",
+            "false_negative_rate_kept",
+            "frac_filtered",
+        ):
             if all(key in r[0] for r in runs):
                 values = np.array([[row[key] for row in r[:n]] for r in runs])
                 series[key] = {"mean": values.mean(0).tolist(), "std": values.std(0).tolist()}
@@ -200,7 +207,8 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
         ("eval_success_rate", "success rate"),
         ("eval_final_distance", "final distance to goal"),
         ("reward_accuracy", "indicator reward accuracy"),
-        ("false_negative_rate", "false-negative rate"),
+        # Among the transitions trained on (after filtering): the rewards the critic is actually given.
+        ("false_negative_rate_kept", "false-negative rate (kept transitions)"),
     )
     fig, axes = plt.subplots(
         len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False
@@ -209,7 +217,7 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
         for ax, (key, label) in zip(row, panels, strict=True):
             for method, res in methods.items():
                 if key not in res["series"] or (
-                    key in ("reward_accuracy", "false_negative_rate") and method == "oracle"
+                    key in ("reward_accuracy", "false_negative_rate_kept") and method == "oracle"
                 ):
                     continue
                 x = np.array(res["env_steps"])

@@ -44,6 +44,8 @@ PROTOCOL_DIFFERENCES = [
     "critic bias initialised at R-/(1-gamma); SB3 has neither",
     "relabeling: SB3 'future' with 4 sampled goals (80% relabeled); ours oracle HER-style p=0.9 uniform over "
     "{t+1..T}; ours indicator balanced 0.45 next / 0.45 future (t'>=t+2) / 0.1 recorded, plus filtering",
+    "input normalisation: ours mean/std of the replay buffer's frames and goals, refreshed every cycle, "
+    "clipped to +-5 (baselines' HER); SB3 none",
     "optimiser: SB3 one Adam per network (critic step then actor step); ours one Adam over both, one backward",
     "ours writes its resume state (weights, optimizer, new episodes) after every cycle; that time counts",
 ]

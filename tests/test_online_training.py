@@ -7,8 +7,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
+
+from lerobot_indicator.keys import goal_key, is_goal_key
 
 BIN = Path(sys.executable).parent
 TINY = [
@@ -63,6 +66,7 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
     for name in ("config.json", "model.safetensors", "train_config.json"):
         assert (pretrained / name).exists(), name
     assert (out / "checkpoints" / "000010" / "training_state" / "training_step.json").exists()
+    _assert_input_stats_cover_every_cycle(out, pretrained)
 
     eval_dir = tmp_path / "eval"
     proc = subprocess.run(
@@ -86,6 +90,23 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
     assert 0.0 <= overall["pc_success"] <= 100.0
     mean_final_distance = -overall["avg_sum_reward"]  # eval_reward=final_distance
     assert 0.0 < mean_final_distance < 1.0
+
+
+def _assert_input_stats_cover_every_cycle(out: Path, pretrained: Path) -> None:
+    """The saved normalisation is the running one: mean/std over both cycles' frames and goals."""
+    from safetensors.torch import load_file
+
+    chunks = [dict(np.load(f)) for f in sorted((out / "replay").glob("cycle_*.npz"))]
+    assert len(chunks) == 2
+    (obs_key,) = [k for k in chunks[0] if k.startswith("obs/") and not is_goal_key(k)]
+    goal = f"obs/{goal_key(obs_key[4:])}"
+    frames = np.concatenate([np.concatenate([c[obs_key], c[goal][:, :1]], axis=1) for c in chunks])
+    frames = frames.reshape(-1, frames.shape[-1])
+    weights = load_file(pretrained / "model.safetensors")
+    for net in ("actor", "critic", "target_actor", "target_critic"):
+        np.testing.assert_allclose(weights[f"{net}.encoder.mean_0"], frames.mean(0), rtol=1e-5, atol=1e-6)
+        std = np.maximum(frames.std(0), 1e-2)  # the encoder's floor for constant dimensions
+        np.testing.assert_allclose(weights[f"{net}.encoder.std_0"], std, rtol=1e-4, atol=1e-6)
 
 
 def test_resume_continues_bit_for_bit(tmp_path):
@@ -211,3 +232,23 @@ def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoi
         for key in ("action", "observation.state", "observation.goal_state", "episode_index"):
             assert torch.equal(a[key], b[key]), (i, key)
     assert not (tmp_path / "split_dataset" / ".recording").exists()  # no journal after a clean finish
+
+
+@pytest.mark.parametrize(
+    ("arg", "message"),
+    [
+        ("--online.input_stats=frozen", "--online.input_stats must be one of"),
+        ("--online.episodes_per_cycle=0", "--online.episodes_per_cycle must be >= 1"),
+        ("--record.checkpoint_every_s=-1", "--record.checkpoint_every_s must be >= 0"),
+    ],
+)
+def test_config_errors_name_the_bad_option(tmp_path, arg, message):
+    import draccus
+
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    cfg = draccus.parse(
+        OnlineTrainConfig, args=[*TINY, *ENVS["sawyer_reach"], f"--output_dir={tmp_path}", arg]
+    )
+    with pytest.raises(ValueError, match=message):
+        cfg.validate()

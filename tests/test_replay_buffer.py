@@ -88,13 +88,33 @@ def test_packing_is_lossless_and_compact():
     assert np.array_equal(buf.obs["observation.state"][0], obs["observation.state"])
 
 
-def test_observation_stats_per_dimension_and_per_channel():
+def _frames_and_goal(e: int, key: str) -> np.ndarray:
+    obs = _episode(e)[0]
+    head, _, name = key.rpartition(".")
+    return np.concatenate([obs[key], obs[f"{head}.goal_{name}"]])
+
+
+def test_observation_stats_cover_frames_and_goals_of_the_stored_episodes():
+    """Per dimension / per channel mean and std over each stored episode's T + 1 frames and its goal (the
+    goal counts: it shares the observation's normalisation); evicted episodes drop out."""
     buf = EpisodeReplayBuffer(capacity_transitions=4 * T, horizon=T)
     for e in range(3):
         buf.add_episode(*_episode(e))
     stats = buf.observation_stats()
-    state = np.concatenate([_episode(e)[0]["observation.state"] for e in range(3)])
+    state = np.concatenate([_frames_and_goal(e, "observation.state") for e in range(3)])
     np.testing.assert_allclose(stats["observation.state"]["mean"], state.mean(0), rtol=1e-6)
     np.testing.assert_allclose(stats["observation.state"]["std"], state.std(0), rtol=1e-6)
+    image = np.concatenate([_frames_and_goal(e, "observation.images.front") for e in range(3)])
     assert stats["observation.images.front"]["mean"].shape == (3, 1, 1)
+    np.testing.assert_allclose(
+        stats["observation.images.front"]["mean"][:, 0, 0], image.mean((0, 2, 3)), rtol=1e-6
+    )
+    np.testing.assert_allclose(
+        stats["observation.images.front"]["std"][:, 0, 0], image.std((0, 2, 3)), rtol=1e-5
+    )
     assert "observation.goal_state" not in stats  # goals are normalised with their observation's stats
+
+    for e in range(3, 6):  # capacity 4: episodes 0 and 1 are evicted
+        buf.add_episode(*_episode(e))
+    state = np.concatenate([_frames_and_goal(e, "observation.state") for e in range(2, 6)])
+    np.testing.assert_allclose(buf.observation_stats()["observation.state"]["mean"], state.mean(0), rtol=1e-6)

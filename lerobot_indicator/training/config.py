@@ -14,6 +14,7 @@ from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.hub import HubMixin
 
 TRAIN_CONFIG_NAME = "train_config.json"
+INPUT_STATS = ("running", "first_cycle")
 
 
 @dataclass
@@ -34,6 +35,11 @@ class OnlineConfig:
     warmup_episodes: int = 0
     # Evaluation episodes (deterministic actor) every env_eval_freq steps.
     eval_episodes: int = 20
+    # Input normalisation of a policy trained from scratch: "running" = mean/std of every episode in the
+    # replay buffer (frames and goals), refreshed each cycle, as baselines' HER; "first_cycle" = frozen
+    # after the first cycle (earlier default: its narrow stats clipped goals outside the first episodes'
+    # range, docs/results/README.md). A --policy.path policy keeps its own stats either way.
+    input_stats: str = "running"
     # torch intra-op threads (None = torch's default). On a CPU shared with other jobs, 1 avoids
     # OpenMP threads spinning against each other (measured: 20 vs 1.2 updates/s, docs/policy.md).
     torch_threads: int | None = None
@@ -93,6 +99,8 @@ class OnlineTrainConfig(HubMixin):
         for name in ("n_envs", "episodes_per_cycle", "updates_per_cycle", "eval_episodes"):
             if getattr(o, name) < 1:
                 raise ValueError(f"--online.{name} must be >= 1, got {getattr(o, name)}")
+        if o.input_stats not in INPUT_STATS:
+            raise ValueError(f"--online.input_stats must be one of {INPUT_STATS}, got {o.input_stats!r}")
         if self.record.checkpoint_every_s < 0:
             raise ValueError(
                 f"--record.checkpoint_every_s must be >= 0, got {self.record.checkpoint_every_s}"

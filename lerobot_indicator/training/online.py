@@ -361,8 +361,8 @@ class OnlineTrainer:
             self._append_replay(rollouts)
             if self.dataset is not None:
                 self._record(rollouts)
-            if cycle == 0 and cfg.policy.pretrained_path is None:
-                # No dataset statistics online: normalise inputs with those of the first episodes
+            if cfg.policy.pretrained_path is None and (cycle == 0 or o.input_stats == "running"):
+                # No dataset statistics online: normalise inputs with those of the buffer's episodes
                 # (saved with the weights, so a resumed or evaluated policy uses the same ones).
                 self.policy.set_observation_stats(self.buffer.observation_stats())
             n_episodes = sum(r.actions.shape[0] for r in rollouts)

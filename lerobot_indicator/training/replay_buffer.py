@@ -7,8 +7,13 @@ LeRobot's ``preprocess_observation`` and the env processors, exactly as eval and
 them, so there is one conversion path and a dataset can seed the buffer. To keep a 5e3-transition
 visual buffer small they are packed losslessly: RGB in [0, 1] that is k/255 goes back to uint8,
 integer-valued depth to uint16 (checked on every episode; a key that stops packing exactly is
-widened to float32). Goal observations are constant within an episode and stored once per episode. Resuming a run does not save this buffer: the
-online trainer rebuilds it from its per-cycle episode chunks (``online.py``).
+widened to float32). Goal observations are constant within an episode and stored once per episode.
+Resuming a run does not save this buffer: the online trainer rebuilds it from its per-cycle episode
+chunks (``online.py``).
+
+Input-normalisation statistics come from per-episode moment sums kept per slot, so refreshing them every
+cycle costs nothing even for a full image buffer, and they depend only on what the buffer holds (a
+resumed run gets the same ones bit for bit).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from lerobot_indicator.keys import is_goal_key
+from lerobot_indicator.keys import goal_key, is_goal_key
 
 Arrays = dict[str, np.ndarray]
 _PACKINGS = ((np.uint8, 255.0), (np.uint16, 1.0))
@@ -85,6 +90,9 @@ class EpisodeReplayBuffer:
         self.actions: np.ndarray | None = None  # (capacity, T, action_dim)
         self.gt_achieved: np.ndarray | None = None  # (capacity, T + 1, goal_dim)
         self.gt_desired: np.ndarray | None = None  # (capacity, goal_dim)
+        # Per slot and observation key: float64 frame count, sum and sum of squares over the episode's T + 1
+        # frames and its goal, per dimension (vectors) or per channel (images, CHW). See observation_stats().
+        self.moments: dict[str, np.ndarray] = {}  # (capacity, 3, dim or C)
         self.num_episodes = 0
         self.next_slot = 0
         self.total_episodes_added = 0
@@ -104,6 +112,7 @@ class EpisodeReplayBuffer:
                 self.goals[key] = _PackedArray((cap, *value.shape[1:]), value[:1])
             else:
                 self.obs[key] = _PackedArray((cap, T + 1, *value.shape[1:]), value)
+                self.moments[key] = np.zeros((cap, 3, value.shape[1]), dtype=np.float64)
         self.actions = np.zeros((cap, T, actions.shape[-1]), dtype=np.float32)
         if gt is not None:
             self.gt_achieved = np.zeros((cap, T + 1, gt["gt_achieved_goal"].shape[-1]), dtype=np.float32)
@@ -138,6 +147,16 @@ class EpisodeReplayBuffer:
                 self.goals[key][slot] = value[0]
             else:
                 self.obs[key][slot] = value
+                goal = observations.get(goal_key(key))
+                frames = np.asarray(value if goal is None else np.concatenate([value, goal[:1]]), np.float64)
+                axes = (0, *range(2, frames.ndim))  # all but the dimension / channel axis
+                count = frames.size / frames.shape[1]
+                moments = self.moments[key][slot]
+                moments[0], moments[1], moments[2] = (
+                    count,
+                    frames.sum(axis=axes),
+                    np.square(frames).sum(axis=axes),
+                )
         self.actions[slot] = actions
         if ground_truth is not None:
             self.gt_achieved[slot] = ground_truth["gt_achieved_goal"]
@@ -182,14 +201,20 @@ class EpisodeReplayBuffer:
         return batch
 
     def observation_stats(self) -> dict[str, dict[str, np.ndarray]]:
-        """Mean/std of every stored observation key over all stored frames (per dimension for vectors,
-        per channel, shaped (C, 1, 1), for images), in the layout of LeRobot's dataset stats."""
+        """Mean/std of every observation key over the stored episodes' frames and their goals, per dimension
+        for vectors and per channel (shaped ``(C, 1, 1)``) for images, in LeRobot's dataset-stats layout.
+
+        Goals count because they share the observation's normalisation: stats of the frames alone miss
+        goals the policy has not visited yet, and clipping then makes those goals indistinguishable.
+        """
         stats = {}
-        for key, packed in self.obs.items():
-            x = packed[: self.num_episodes]  # (episodes, T + 1, ...)
-            axes = (0, 1) if x.ndim == 3 else (0, 1, *range(3, x.ndim))
-            keep = x.ndim > 3
-            stats[key] = {"mean": x.mean(axis=axes, keepdims=keep), "std": x.std(axis=axes, keepdims=keep)}
-            if keep:
-                stats[key] = {k: v.reshape(v.shape[2:]) for k, v in stats[key].items()}
+        for key, moments in self.moments.items():
+            count, total, total_sq = moments[: self.num_episodes].sum(axis=0)
+            mean, mean_sq = total / count, total_sq / count
+            std = np.sqrt(np.maximum(mean_sq - np.square(mean), 0.0))
+            shape = (-1,) + (1,) * (self.obs[key].data.ndim - 3)
+            stats[key] = {
+                "mean": mean.astype(np.float32).reshape(shape),
+                "std": std.astype(np.float32).reshape(shape),
+            }
         return stats

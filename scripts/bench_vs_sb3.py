@@ -178,6 +178,7 @@ def ours_config(method: str, seed: int, args: argparse.Namespace, output_dir: Pa
         f"--online.batch_size={args.batch_size}",
         f"--online.eval_episodes={args.eval_episodes}",
         f"--steps={steps}",
+        f"--policy.compile_model={str(args.compile).lower()}",
         f"--env_eval_freq={args.eval_every * args.updates_per_cycle // (args.episodes_per_cycle * HORIZON)}",
         "--save_checkpoint=false",
         f"--seed={seed}",
@@ -256,28 +257,32 @@ def run_ours(method: str, seed: int, args: argparse.Namespace) -> dict:
 # update throughput, one process, interleaved
 # ----------------------------------------------------------------------------------------------------------
 def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, list[float]]:
-    """Seconds per block of ``updates_per_block`` gradient steps for each arm (see ``bench_updates``)."""
+    """Seconds per block of ``updates_per_block`` gradient steps for each arm (see ``bench_updates``): ours
+    (eager), ours with ``--policy.compile_model=true`` when ``--compile`` is given, and SB3."""
     n = args.updates_per_block
+    variants = {"ours": False, **({"ours_compiled": True} if args.compile else {})}
+    arms, trainers = {}, []
     with tempfile.TemporaryDirectory() as tmp:
-        cfg, _ = ours_config(method, 0, args, Path(tmp) / "run", steps=max(n, args.updates_per_cycle))
-        cfg.online.updates_per_cycle = n
-        trainer = timed_trainer_class()(cfg)
-        g = torch.Generator().manual_seed(0)
-        for cycle in range(args.fill_episodes // args.episodes_per_cycle):
-            for r in trainer.collect(cycle, g, warmup=True):
-                for episode in r.episodes():
-                    trainer.buffer.add_episode(*episode)
-        rng = np.random.default_rng(0)
-
-        def ours() -> None:
-            trainer.optimise(rng, g)
+        for name, compiled in variants.items():
+            cfg, _ = ours_config(method, 0, args, Path(tmp) / name, steps=max(n, args.updates_per_cycle))
+            cfg.online.updates_per_cycle = n
+            cfg.policy.compile_model = compiled
+            trainer = timed_trainer_class()(cfg)
+            g = torch.Generator().manual_seed(0)
+            for cycle in range(args.fill_episodes // args.episodes_per_cycle):
+                for r in trainer.collect(cycle, g, warmup=True):
+                    for episode in r.episodes():
+                        trainer.buffer.add_episode(*episode)
+            rng = np.random.default_rng(0)
+            arms[name] = lambda trainer=trainer, rng=rng, g=g: trainer.optimise(rng, g)
+            trainers.append(trainer)
 
         def sb3_train() -> None:
             sb3.train(gradient_steps=n, batch_size=args.batch_size)
 
-        arms = {"ours": ours, "sb3": sb3_train}
+        arms["sb3"] = sb3_train
         names = list(arms)
-        for name in names:  # warm-up
+        for name in names:  # warm-up (and compilation)
             arms[name]()
         times: dict[str, list[float]] = {name: [] for name in names}
         for block in range(args.update_blocks):
@@ -286,7 +291,8 @@ def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, li
                 t0 = time.perf_counter()
                 arms[name]()
                 times[name].append(time.perf_counter() - t0)
-        trainer.close()
+        for trainer in trainers:
+            trainer.close()
     return times
 
 
@@ -310,7 +316,11 @@ def bench_updates(args: argparse.Namespace) -> dict:
         print(
             f"updates/s {method}: "
             + ", ".join(f"{name} {r[f'{name}_updates_per_s']:.1f}" for name in times)
-            + f", ours/SB3 {r['ours_over_sb3']:.2f} (median of blocks {r['ours_over_sb3_median_of_blocks']:.2f})",
+            + "".join(
+                f", {name}/SB3 {r[f'{name}_over_sb3']:.2f} (median of blocks {r[f'{name}_over_sb3_median_of_blocks']:.2f})"
+                for name in times
+                if name != "sb3"
+            ),
             flush=True,
         )
     return {
@@ -436,7 +446,9 @@ RUN_OPTIONS = (
 
 def run_options(args: argparse.Namespace) -> list[str]:
     """The options a training-run subprocess needs, from the parent's parsed arguments."""
-    return [f"--{k.replace('_', '-')}={getattr(args, k)}" for k in RUN_OPTIONS]
+    return [f"--{k.replace('_', '-')}={getattr(args, k)}" for k in RUN_OPTIONS] + (
+        ["--compile"] if args.compile else []
+    )
 
 
 def main() -> None:
@@ -452,6 +464,11 @@ def main() -> None:
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--noise", type=float, default=0.2, help="Gaussian action noise std (both)")
     p.add_argument("--threads", type=int, default=1, help="torch threads in every process")
+    p.add_argument(
+        "--compile",
+        action="store_true",
+        help="ours with --policy.compile_model=true: an extra update-throughput arm, and the training runs",
+    )
     p.add_argument("--fill-episodes", type=int, default=40, help="update benchmark: episodes in the buffers")
     p.add_argument("--updates-per-block", type=int, default=50)
     p.add_argument("--update-blocks", type=int, default=6)

@@ -42,3 +42,77 @@ def test_start_distance_is_the_eval_goals_distance_at_reset(tmp_path):
         sys.path.remove(str(ROOT / "scripts"))
     reference = experiments.start_distances(tmp_path, ["reach_state", "rope_state"])
     assert reference == {"reach_state": record["start_distance_mean"]}
+
+
+def _import_script(name: str):
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        return __import__(name)
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+
+
+def test_eval_goals_flags_goals_the_encoder_clips():
+    from lerobot.configs import FeatureType, PolicyFeature
+
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+    from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
+
+    cfg = IndicatorDDPGConfig(device="cpu", hidden_dims=[8, 8, 8], input_clip=5.0)
+    vec, rgb = PolicyFeature(FeatureType.STATE, (3,)), PolicyFeature(FeatureType.VISUAL, (3, 32, 32))
+    cfg.input_features = {
+        "observation.state": vec,
+        "observation.goal_state": vec,
+        "observation.images.front": rgb,
+        "observation.images.goal_front": rgb,
+    }
+    cfg.output_features = {"action": PolicyFeature(FeatureType.ACTION, (3,))}
+    cfg.observation_keys = ["observation.state", "observation.images.front"]
+    policy = IndicatorDDPGPolicy(cfg)
+    policy.set_observation_stats(
+        {
+            "observation.state": {"mean": np.zeros(3), "std": np.full(3, 0.1)},
+            "observation.images.front": {"mean": np.full((3, 1, 1), 0.5), "std": np.full((3, 1, 1), 0.05)},
+        }
+    )
+    image = np.full((2, 3, 32, 32), 0.5, np.float32)
+    image[1, 2, 4, 4] = 0.8  # one pixel of channel 2, 6 std away
+    goals = {
+        "observation.state": np.array([[0.0, 0.49, -0.51], [0.1, 0.2, 0.3]], np.float32),
+        "observation.images.front": image,
+    }
+    flagged = _import_script("eval_goals").clipped_goal_dims(policy, goals)
+    assert flagged == [["observation.state[2]"], ["observation.images.front[2]"]]
+
+
+def test_eval_goals_on_a_trained_checkpoint(tmp_path):
+    env_args = ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]
+    train = [
+        str(Path(sys.executable).parent / "lerobot-indicator-train"),
+        *env_args,
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        "--policy.device=cpu",
+        "--online.n_envs=1",
+        "--online.use_async_envs=false",
+        "--online.episodes_per_cycle=1",
+        "--online.updates_per_cycle=5",
+        "--online.batch_size=16",
+        "--online.eval_episodes=1",
+        "--steps=5",
+        f"--output_dir={tmp_path / 'run'}",
+    ]
+    env = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
+    subprocess.run(train, cwd=ROOT, check=True, env=env, capture_output=True)
+    out = tmp_path / "eval_goals.json"
+    policy_path = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
+    cmd = [sys.executable, "scripts/eval_goals.py", *env_args, f"--policy_path={policy_path}", "--episodes=2"]
+    subprocess.run([*cmd, f"--out={out}"], cwd=ROOT, check=True, env=env, capture_output=True)
+    record = json.loads(out.read_text())
+    assert [r["seed"] for r in record["episodes"]] == [EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + 1]
+    for row in record["episodes"]:
+        final = np.linalg.norm(np.subtract(row["gt_goal"], row["gt_final"]))
+        assert abs(final - row["final_distance"]) < 1e-3  # positions are rounded to 0.1 mm
+        assert row["success"] == (row["final_distance"] <= 0.05)
+    assert record["success_rate"] == np.mean([r["success"] for r in record["episodes"]])
+    assert set(record["input_stats"]) == {"observation.state"}

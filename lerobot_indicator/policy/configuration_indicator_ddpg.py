@@ -76,6 +76,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     tau: float = 0.98  # target <- tau * target + (1 - tau) * online
     action_l2: float = 1.0  # baselines' HER penalty on the squared actor output
     learning_rate: float = 1e-3
+    # torch.compile the loss (relabel -> reward -> filter -> DDPG losses) into one graph: fuses the
+    # elementwise work around the matmuls (docs/policy.md has the measured gain); the first update pays the
+    # compilation (tens of seconds on CPU, needs a C++ compiler). Same names as LeRobot's pi0 config.
+    compile_model: bool = False
+    compile_mode: str = "default"
     # Exploration (used by the online trainer only, never by select_action).
     noise_eps: float = 0.2
     random_eps: float = 0.3

@@ -158,7 +158,7 @@ def indicator_ddpg_loss(
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
     generator: torch.Generator | None = None,
-) -> tuple[Tensor, dict[str, float]]:
+) -> tuple[Tensor, dict[str, Tensor]]:
     """One DDPG step's loss on a transition batch (module docstring), with relabeling, rewards and filtering.
 
     Returns ``critic_loss + actor_loss``: the critic gets gradients only from the TD loss (targets and the
@@ -166,6 +166,9 @@ def indicator_ddpg_loss(
     pi^2 (evaluated through the critic's head with detached weights, on the same detached encoding of
     (o, g) as Q(o, g, a)), so one backward and one optimizer step over both
     parameter sets equals separate actor and critic updates.
+
+    Logging stats are 0-d tensors (``stats_to_floats`` reads them): no host sync inside, so
+    ``torch.compile`` captures the whole function as one graph.
     """
     keys = config.observation_keys
     obs = {k: batch[k] for k in keys}
@@ -211,24 +214,29 @@ def indicator_ddpg_loss(
     valid_f = valid.float()
     positive = (reward == config.positive_reward).float()
     stats = {
-        "critic_loss": critic_loss.item(),
-        "actor_loss": actor_loss.item(),
-        "q_mean": masked_mean(q.detach(), valid_f).item(),
-        "q_target_mean": masked_mean(target, valid_f).item(),
-        "frac_positive": masked_mean(positive, valid_f).item(),
-        "frac_filtered": masked_mean((~keep).float(), valid_f).item(),
-        "frac_goal_next": masked_mean((relabel.source == SOURCE_NEXT).float(), valid_f).item(),
-        "frac_goal_future": masked_mean((relabel.source == SOURCE_FUTURE).float(), valid_f).item(),
-        "frac_goal_recorded": masked_mean((relabel.source == SOURCE_RECORDED).float(), valid_f).item(),
+        "critic_loss": critic_loss.detach(),
+        "actor_loss": actor_loss.detach(),
+        "q_mean": masked_mean(q.detach(), valid_f),
+        "q_target_mean": masked_mean(target, valid_f),
+        "frac_positive": masked_mean(positive, valid_f),
+        "frac_filtered": masked_mean((~keep).float(), valid_f),
+        "frac_goal_next": masked_mean((relabel.source == SOURCE_NEXT).float(), valid_f),
+        "frac_goal_future": masked_mean((relabel.source == SOURCE_FUTURE).float(), valid_f),
+        "frac_goal_recorded": masked_mean((relabel.source == SOURCE_RECORDED).float(), valid_f),
     }
     if gt_goal is not None:
         stats |= reward_statistics(reward, batch[GT_NEXT_ACHIEVED], gt_goal, keep, valid, config)
     return critic_loss + actor_loss, stats
 
 
+def stats_to_floats(stats: dict[str, Tensor]) -> dict[str, float]:
+    """Python floats for logging, read back in one transfer (one ``.item()`` each would sync every time)."""
+    return dict(zip(stats, torch.stack(list(stats.values())).tolist(), strict=True))
+
+
 def reward_statistics(
     reward: Tensor, gt_next: Tensor, gt_goal: Tensor, keep: Tensor, valid: Tensor, config: IndicatorDDPGConfig
-) -> dict[str, float]:
+) -> dict[str, Tensor]:
     """How the proxy reward compares with the ground-truth one (paper section 4): accuracy and error rates.
 
     ``false_negative_rate`` = P(R- | ground-truth success); ``false_negative_rate_kept`` is the same among the
@@ -240,11 +248,11 @@ def reward_statistics(
     neg = ~pos & valid
     kept_gt_pos = gt_pos & keep
     return {
-        "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()).item(),
-        "false_negative_rate": ((neg & gt_pos).sum() / gt_pos.sum().clamp_min(1)).item(),
-        "false_positive_rate": ((pos & gt_neg).sum() / gt_neg.sum().clamp_min(1)).item(),
-        "false_negative_rate_kept": ((neg & kept_gt_pos).sum() / kept_gt_pos.sum().clamp_min(1)).item(),
-        "frac_gt_positive": masked_mean(gt_pos.float(), valid.float()).item(),
+        "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()),
+        "false_negative_rate": ((neg & gt_pos).sum() / gt_pos.sum().clamp_min(1)),
+        "false_positive_rate": ((pos & gt_neg).sum() / gt_neg.sum().clamp_min(1)),
+        "false_negative_rate_kept": ((neg & kept_gt_pos).sum() / kept_gt_pos.sum().clamp_min(1)),
+        "frac_gt_positive": masked_mean(gt_pos.float(), valid.float()),
     }
 
 

@@ -35,6 +35,9 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         self.critic = Critic(config, dataset_stats)
         self.target_actor = copy.deepcopy(self.actor).requires_grad_(False)
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
+        self._loss = indicator_core.indicator_ddpg_loss
+        if config.compile_model:
+            self._loss = torch.compile(self._loss, mode=config.compile_mode)
 
     def set_observation_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
         """Input normalisation of every network (online and target) from ``{key: {"mean", "std"}}``."""
@@ -59,9 +62,10 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         lerobot-train seeds and restores on resume)."""
         if not indicator_core.is_transition_batch(batch, self.config):
             batch = indicator_core.dataset_batch_to_transitions(batch, self.config, generator)
-        return indicator_core.indicator_ddpg_loss(
+        loss, stats = self._loss(
             batch, self.actor, self.critic, self.target_actor, self.target_critic, self.config, generator
         )
+        return loss, indicator_core.stats_to_floats(stats)
 
     def _split(self, batch: dict[str, Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
         missing = [k for k in self.config.observation_keys + self.config.goal_keys if k not in batch]

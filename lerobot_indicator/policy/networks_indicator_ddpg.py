@@ -32,9 +32,13 @@ def tanh(x: Tensor) -> Tensor:
     ATen's CPU tanh kernel took 210 us on a 256x256 tensor vs 100 us for this on the project's AVX2 CPUs, and
     the 3x256 tanh MLPs call it 17 times per DDPG update (~20% of a state update with torch.tanh; most of an
     RGB-D one, over the conv feature maps). The backward is torch's own
-    ``tanh_backward`` on the output. Elsewhere (CUDA) torch.tanh is already fast and is used as is.
+    ``tanh_backward`` on the output. Elsewhere (CUDA) torch.tanh is already fast and is used as is, and so it
+    is under ``torch.compile`` (``compile_model``), which fuses it, and which mis-traces the in-place ops here
+    (measured: zero gradients below the last layer).
     """
-    return _SigmoidTanh.apply(x) if x.device.type == "cpu" else torch.tanh(x)
+    if x.device.type != "cpu" or torch.compiler.is_compiling():
+        return torch.tanh(x)
+    return _SigmoidTanh.apply(x)
 
 
 class Tanh(nn.Module):
@@ -100,8 +104,8 @@ class ObservationEncoder(nn.Module):
     @torch.no_grad()
     def set_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
         """Normalisation of each compared key (and so of its goal) from ``{key: {"mean", "std"}}``;
-        keys without stats keep theirs. The online trainer calls this with statistics of its first
-        episodes, since it has no dataset."""
+        keys without stats keep theirs. The online trainer calls this every cycle with statistics of its
+        replay buffer, since it has no dataset."""
         for key, i in self._index.items():
             if key not in stats or "mean" not in stats[key] or "std" not in stats[key]:
                 continue
@@ -112,10 +116,19 @@ class ObservationEncoder(nn.Module):
                 torch.as_tensor(stats[key]["std"], dtype=torch.float32).expand(std.shape).clamp_min(1e-2)
             )
 
-    def normalize(self, key: str, x: Tensor) -> Tensor:
+    def stats(self) -> dict[str, dict[str, Tensor]]:
+        return {
+            k: {"mean": getattr(self, f"mean_{i}"), "std": getattr(self, f"std_{i}")}
+            for k, i in self._index.items()
+        }
+
+    def standardize(self, key: str, x: Tensor) -> Tensor:
+        """``(x - mean) / std`` before clipping (values beyond ``input_clip`` are indistinguishable)."""
         i = self._index[key]
-        x = (x - getattr(self, f"mean_{i}")) / getattr(self, f"std_{i}")
-        return x.clamp(-self.input_clip, self.input_clip)
+        return (x - getattr(self, f"mean_{i}")) / getattr(self, f"std_{i}")
+
+    def normalize(self, key: str, x: Tensor) -> Tensor:
+        return self.standardize(key, x).clamp(-self.input_clip, self.input_clip)
 
     def forward(self, obs: dict[str, Tensor]) -> Tensor:
         parts = [self.normalize(k, obs[k]).flatten(1) for k in self.state_keys]

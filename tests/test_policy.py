@@ -177,6 +177,21 @@ def test_oracle_reward_counts_near_goals_and_indicator_misses_them():
     assert stats["frac_positive"] == 1.0 and stats["reward_accuracy"] == 1.0
 
 
+def test_filter_precision_counts_ground_truth_successes_among_filtered():
+    """``filtered_gt_success_rate`` = P(ground-truth success | filtered): 1 where every R- is a near miss
+    (huge oracle epsilon), 0 where ground truth agrees with the indicator (every frame differs by >= 1)."""
+    for epsilon, expected in ((1e6, 1.0), (0.5, 0.0)):
+        cfg = make_config({STATE: vec(), GOAL: vec()}, future_offsets=[2, 4], oracle_epsilon=epsilon)
+        policy = IndicatorDDPGPolicy(cfg)
+        torch.nn.init.constant_(policy.critic.net[-1].bias, cfg.q0 + 100)  # every R- is filtered
+        batch = dataset_batch(256, cfg.future_offsets, torch.full((256,), 4))
+        _, stats = policy.forward(batch, generator=torch.Generator().manual_seed(0))
+        assert (
+            stats["frac_filtered"] == pytest.approx(1 - stats["frac_positive"]) and stats["frac_filtered"] > 0
+        )
+        assert stats["filtered_gt_success_rate"] == expected
+
+
 def test_oracle_reward_without_ground_truth_is_an_error():
     cfg = make_config({STATE: vec(), GOAL: vec()}, future_offsets=[2, 4], reward="oracle")
     batch = dataset_batch(8, cfg.future_offsets, torch.full((8,), 4))

@@ -240,19 +240,23 @@ def reward_statistics(
     """How the proxy reward compares with the ground-truth one (paper section 4): accuracy and error rates.
 
     ``false_negative_rate`` = P(R- | ground-truth success); ``false_negative_rate_kept`` is the same among the
-    transitions the filter kept, which shows what filtering removes.
+    transitions the filter kept, which shows what filtering removes. ``filtered_gt_success_rate`` = P(ground-truth
+    success | filtered), the filter's precision: section 5.3 assumes the transitions it drops are mostly false
+    negatives; the rest were genuine negative evidence (0 when nothing was filtered).
     """
     gt_pos = ground_truth_success(gt_next, gt_goal, config.oracle_epsilon) & valid
     gt_neg = ~gt_pos & valid
     pos = (reward == config.positive_reward) & valid
     neg = ~pos & valid
     kept_gt_pos = gt_pos & keep
+    filtered = valid & ~keep
     return {
         "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()),
-        "false_negative_rate": ((neg & gt_pos).sum() / gt_pos.sum().clamp_min(1)),
-        "false_positive_rate": ((pos & gt_neg).sum() / gt_neg.sum().clamp_min(1)),
-        "false_negative_rate_kept": ((neg & kept_gt_pos).sum() / kept_gt_pos.sum().clamp_min(1)),
+        "false_negative_rate": (neg & gt_pos).sum() / gt_pos.sum().clamp_min(1),
+        "false_positive_rate": (pos & gt_neg).sum() / gt_neg.sum().clamp_min(1),
+        "false_negative_rate_kept": (neg & kept_gt_pos).sum() / kept_gt_pos.sum().clamp_min(1),
         "frac_gt_positive": masked_mean(gt_pos.float(), valid.float()),
+        "filtered_gt_success_rate": (filtered & gt_pos).sum() / filtered.sum().clamp_min(1),
     }
 
 

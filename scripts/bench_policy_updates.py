@@ -6,7 +6,7 @@ Two settings of the paper's appendix: state inputs with batch 256, and 100x100 R
 ``observation_delta_indices`` = [0] (no relabeling), [0, 1, 2] (one future offset) and the default
 [0, 1, 2, 4, 8, 16]. Writes a JSON record (default ``docs/results/policy_updates.json``).
 
-    python scripts/bench_policy_updates.py [--device cpu] [--seconds 20] [--dataset-cost] [--out ...]
+    python scripts/bench_policy_updates.py [--device cpu] [--seconds 20] [--dataset-cost] [--compile] [--out ...]
 """
 
 import argparse
@@ -36,8 +36,8 @@ SETTINGS = {
 }
 
 
-def make_policy(features: dict, device: str) -> IndicatorDDPGPolicy:
-    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features))
+def make_policy(features: dict, device: str, compile_model: bool = False) -> IndicatorDDPGPolicy:
+    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), compile_model=compile_model)
     cfg.input_features = {}
     for key, (ftype, shape) in features.items():
         cfg.input_features[key] = cfg.input_features[goal_key(key)] = PolicyFeature(ftype, shape)
@@ -56,9 +56,9 @@ def make_batch(features: dict, batch_size: int, device: str) -> dict[str, torch.
     return {k: v.to(device) for k, v in batch.items()}
 
 
-def bench(name: str, device: str, seconds: float) -> dict:
+def bench(name: str, device: str, seconds: float, compile_model: bool = False) -> dict:
     setting = SETTINGS[name]
-    policy = make_policy(setting["features"], device)
+    policy = make_policy(setting["features"], device, compile_model)
     batch = make_batch(setting["features"], setting["batch_size"], device)
     optimizer = policy.config.get_optimizer_preset().build(policy.get_optim_params())
 
@@ -69,8 +69,10 @@ def bench(name: str, device: str, seconds: float) -> dict:
         optimizer.zero_grad()
         policy.update()
 
-    for _ in range(3):  # warm-up
+    t0 = time.perf_counter()
+    for _ in range(3):  # warm-up (and compilation)
         step()
+    warmup_s = time.perf_counter() - t0
     if device.startswith("cuda"):
         torch.cuda.synchronize()
     n, start = 0, time.perf_counter()
@@ -85,6 +87,8 @@ def bench(name: str, device: str, seconds: float) -> dict:
         "updates": n,
         "seconds": elapsed,
         "updates_per_s": n / elapsed,
+        "compile_model": compile_model,
+        "warmup_s": warmup_s,
     }
 
 
@@ -174,10 +178,13 @@ def main() -> None:
     parser.add_argument("--dataset-cost", action="store_true")
     parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (default: torch's)")
     parser.add_argument("--out", type=Path, default=Path("docs/results/policy_updates.json"))
+    parser.add_argument("--compile", action="store_true", help="also time --policy.compile_model=true")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
     results = {name: bench(name, args.device, args.seconds) for name in SETTINGS}
+    if args.compile:
+        results |= {f"{name}_compiled": bench(name, args.device, args.seconds, True) for name in SETTINGS}
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()
     record = {
         "device": args.device,

@@ -325,3 +325,9 @@ def test_compiled_loss_matches_eager_loss_and_gradients():
     for grad_c, grad_e in zip(grads_c, grads_e, strict=True):
         assert grad_e.abs().max() > 0
         torch.testing.assert_close(grad_c, grad_e, rtol=1e-4, atol=1e-6)
+    # A second batch size (a last short batch) recompiles rather than failing on a symbolic size.
+    small = {k: v[:10] for k, v in batch.items()}
+    torch.testing.assert_close(
+        compiled.forward(small, generator=torch.Generator().manual_seed(3))[0],
+        eager.forward(small, generator=torch.Generator().manual_seed(3))[0],
+    )

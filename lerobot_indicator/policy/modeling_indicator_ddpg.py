@@ -37,7 +37,9 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
         self._loss = indicator_core.indicator_ddpg_loss
         if config.compile_model:
-            self._loss = torch.compile(self._loss, mode=config.compile_mode)
+            # Static shapes: a second batch size (a last short batch, another policy in the same process)
+            # recompiles instead of going symbolic, which torch.rand(size, generator=...) does not support.
+            self._loss = torch.compile(self._loss, mode=config.compile_mode, dynamic=False)
 
     def set_observation_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
         """Input normalisation of every network (online and target) from ``{key: {"mean", "std"}}``."""

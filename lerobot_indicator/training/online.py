@@ -57,6 +57,9 @@ class Progress:
     wall_time_s: float = 0.0
     seeded_episodes: int = 0  # from --dataset, before any rollout
     recorded_episodes: int = 0  # in the --record dataset's last checkpoint when this state was saved
+    # False when training a --policy.path policy, which keeps its own input normalisation (a resumed run
+    # also loads a checkpoint as pretrained_path, so this is decided once, at the start, and saved).
+    own_input_stats: bool = True
     # (file name, global index of its first episode) of the episode chunks still needed to rebuild the buffer
     replay_files: list[tuple[str, int]] = field(default_factory=list)
 
@@ -342,7 +345,9 @@ class OnlineTrainer:
         cfg, o = self.cfg, self.cfg.online
         if cfg.resume:
             self._load_resume_state()
-        elif cfg.dataset is not None:
+        else:
+            self.progress.own_input_stats = cfg.policy.pretrained_path is None
+        if not cfg.resume and cfg.dataset is not None:
             self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
             self.progress.episodes = self.progress.seeded_episodes
         self._record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
@@ -361,7 +366,7 @@ class OnlineTrainer:
             self._append_replay(rollouts)
             if self.dataset is not None:
                 self._record(rollouts)
-            if cfg.policy.pretrained_path is None and (cycle == 0 or o.input_stats == "running"):
+            if self.progress.own_input_stats and (cycle == 0 or o.input_stats == "running"):
                 # No dataset statistics online: normalise inputs with those of the buffer's episodes
                 # (saved with the weights, so a resumed or evaluated policy uses the same ones).
                 self.policy.set_observation_stats(self.buffer.observation_stats())

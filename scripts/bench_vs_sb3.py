@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 # What differs between the SB3 and our learners beyond the shared hyper-parameters (each library's defaults).
 PROTOCOL_DIFFERENCES = [
@@ -282,8 +283,14 @@ def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, li
 
         arms["sb3"] = sb3_train
         names = list(arms)
-        for name in names:  # warm-up (and compilation)
-            arms[name]()
+        flops = {}
+        for name in names:  # warm-up (and compilation); matmul FLOPs counted on the eager arms
+            if name in ("ours", "sb3"):
+                with FlopCounterMode(display=False) as counter:
+                    arms[name]()
+                flops[name] = counter.get_total_flops() / n
+            else:
+                arms[name]()
         times: dict[str, list[float]] = {name: [] for name in names}
         for block in range(args.update_blocks):
             k = block % len(names)
@@ -293,20 +300,37 @@ def time_update_arms(method: str, sb3, args: argparse.Namespace) -> dict[str, li
                 times[name].append(time.perf_counter() - t0)
         for trainer in trainers:
             trainer.close()
-    return times
+    return times, flops
+
+
+def sgemm_gflops(size: int = 256, repeats: int = 400) -> float:
+    """This core's float32 matmul throughput at the update's layer size: the roofline for both libraries."""
+    a, b = torch.randn(size, size), torch.randn(size, size)
+    for _ in range(20):
+        a @ b
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        a @ b
+    return 2 * size**3 * repeats / (time.perf_counter() - t0) / 1e9
 
 
 def bench_updates(args: argparse.Namespace) -> dict:
     """Gradient updates/s at batch 256 incl. replay sampling (what each library's train step does), both
     buffers filled with the same number of random-action episodes; blocks interleaved, the order of the arms
-    rotating every block."""
+    rotating every block. Also each library's matmul FLOPs per update (``torch.utils.flop_counter``; the
+    compiled arm does the same math as ``ours``) and the share of the core's measured sgemm throughput they
+    reach: the headroom left once the matmuls dominate."""
     n = args.updates_per_block
     sb3 = make_sb3(0, args, learning_starts=10**9)
     sb3.learn(total_timesteps=args.fill_episodes * HORIZON)  # random actions, no training
     results = {}
     for method in ("ours_indicator", "ours_oracle"):
-        times = time_update_arms(method, sb3, args)
+        times, flops = time_update_arms(method, sb3, args)
         r = {f"{name}_updates_per_s": n * len(t) / sum(t) for name, t in times.items()}
+        flops["ours_compiled"] = flops["ours"]
+        for name in times:
+            r[f"{name}_matmul_gflop_per_update"] = flops[name] / 1e9
+            r[f"{name}_matmul_gflops"] = flops[name] * r[f"{name}_updates_per_s"] / 1e9
         r |= {f"per_block_{name}": [n / x for x in t] for name, t in times.items()}
         for name in (x for x in times if x != "sb3"):
             ratios = [b / s for b, s in zip(times["sb3"], times[name], strict=True)]
@@ -320,10 +344,18 @@ def bench_updates(args: argparse.Namespace) -> dict:
                 f", {name}/SB3 {r[f'{name}_over_sb3']:.2f} (median of blocks {r[f'{name}_over_sb3_median_of_blocks']:.2f})"
                 for name in times
                 if name != "sb3"
-            ),
+            )
+            + "; matmul GFLOP/s "
+            + ", ".join(f"{name} {r[f'{name}_matmul_gflops']:.1f}" for name in times),
             flush=True,
         )
+    peak = sgemm_gflops()
+    for r in results.values():
+        for name in [k.removesuffix("_matmul_gflops") for k in r if k.endswith("_matmul_gflops")]:
+            r[f"{name}_share_of_sgemm_peak"] = r[f"{name}_matmul_gflops"] / peak
+    print(f"sgemm 256x256x256 on this core: {peak:.1f} GFLOP/s", flush=True)
     return {
+        "sgemm_gflops_256": peak,
         "batch_size": args.batch_size,
         "filled_episodes": args.fill_episodes,
         "updates_per_block": n,

@@ -16,6 +16,7 @@ import shlex
 import subprocess
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,6 +48,12 @@ LABELS = {
     "indicator_balance": "Indicator+Balance",
     "indicator_filter": "Indicator+Filter",
     "indicator_balance_filter": "Indicator+Balance+Filter",
+}
+# Panels that only mean something for some methods (default: every method with the series).
+PANEL_METHODS = {
+    "reward_accuracy": [m for m in METHODS if m != "oracle"],
+    "false_negative_rate_kept": [m for m in METHODS if m != "oracle"],
+    "filtered_gt_success_rate": ["indicator_filter", "indicator_balance_filter"],
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -101,6 +108,8 @@ class ExperimentConfig:
     # 1 keeps runs fast when the CPU is shared (OpenMP spin-waiting otherwise dominates).
     torch_threads: int = 1
     plot_only: bool = False
+    # Extra table rows at these env-step budgets (methods run to different budgets compare at a shared one).
+    table_env_steps: list[int] = field(default_factory=list)
     extra_args: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -173,13 +182,23 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
             "false_negative_rate",
             "false_negative_rate_kept",
             "frac_filtered",
+            "filtered_gt_success_rate",
         ):
-            if all(key in r[0] for r in runs):
-                values = np.array([[row[key] for row in r[:n]] for r in runs])
-                series[key] = {"mean": values.mean(0).tolist(), "std": values.std(0).tolist()}
+            if any(key in row for r in runs for row in r[:n]):
+                # NaN where a row lacks the key (a metric added after the run started); null in the JSON.
+                values = np.array([[_value(row, key) for row in r[:n]] for r in runs], dtype=float)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+                    mean, std = np.nanmean(values, 0), np.nanstd(values, 0)
+                series[key] = {"mean": _nan_to_none(mean), "std": _nan_to_none(std)}
         final_success = [r[n - 1]["eval_success_rate"] for r in runs]
         final_distance = [r[n - 1]["eval_final_distance"] for r in runs]
         result[method] = {
+            "per_seed": {
+                "env_steps": [[row["env_steps"] for row in r[:n]] for r in runs],
+                "eval_success_rate": [[row["eval_success_rate"] for row in r[:n]] for r in runs],
+                "eval_final_distance": [[row["eval_final_distance"] for row in r[:n]] for r in runs],
+            },
             "env_steps": [row["env_steps"] for row in runs[0][:n]],
             "series": series,
             "n_seeds": len(runs),
@@ -192,6 +211,18 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
             "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
         }
     return result
+
+
+def _value(row: dict, key: str) -> float:
+    """A logged metric, NaN where undefined: missing, or the filter's precision in a cycle that filtered nothing
+    (logged as 0)."""
+    if key == "filtered_gt_success_rate" and not row.get("frac_filtered"):
+        return np.nan
+    return row.get(key, np.nan)
+
+
+def _nan_to_none(values: np.ndarray) -> list[float | None]:
+    return [None if np.isnan(v) else float(v) for v in values]
 
 
 def start_distances(out: Path, tasks: list[str]) -> dict[str, float]:
@@ -209,6 +240,8 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
         ("reward_accuracy", "indicator reward accuracy"),
         # Among the transitions trained on (after filtering): the rewards the critic is actually given.
         ("false_negative_rate_kept", "false-negative rate (kept transitions)"),
+        # What filtering discards: the share of it that is a ground-truth success (a true false negative).
+        ("filtered_gt_success_rate", "filter precision P(success | filtered)"),
     )
     fig, axes = plt.subplots(
         len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False
@@ -216,12 +249,10 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
     for row, (task, methods) in zip(axes, summary.items(), strict=True):
         for ax, (key, label) in zip(row, panels, strict=True):
             for method, res in methods.items():
-                if key not in res["series"] or (
-                    key in ("reward_accuracy", "false_negative_rate_kept") and method == "oracle"
-                ):
+                if key not in res["series"] or method not in PANEL_METHODS.get(key, METHODS):
                     continue
                 x = np.array(res["env_steps"])
-                mean, std = (np.array(res["series"][key][s]) for s in ("mean", "std"))
+                mean, std = (np.array(res["series"][key][s], dtype=float) for s in ("mean", "std"))
                 color, dash = STYLES[method]
                 ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
                 ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
@@ -240,18 +271,34 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
     plt.close(fig)
 
 
-def table(summary: dict) -> str:
+def table(summary: dict, env_steps: list[int] | None = None) -> str:
+    """Final success and distance (mean ± std over seeds) per method, then the same at each of ``env_steps``
+    for the methods whose runs all reached it."""
     lines = [
         "| task | method | seeds | env steps | success rate | final distance |",
         "|---|---|---|---|---|---|",
     ]
-    for task, methods in summary.items():
-        for method, res in methods.items():
-            s, d = res["final_success_rate"], res["final_distance"]
-            lines.append(
-                f"| {task} | {LABELS[method]} | {res['n_seeds']} | {res['final_env_steps']} | "
-                f"{s['mean']:.2f} ± {s['std']:.2f} | {d['mean']:.3f} ± {d['std']:.3f} |"
-            )
+
+    def row(task: str, method: str, n_seeds: int, steps: int, success: list, distance: list) -> str:
+        return (
+            f"| {task} | {LABELS[method]} | {n_seeds} | {steps} | {np.mean(success):.2f} ± {np.std(success):.2f}"
+            f" | {np.mean(distance):.3f} ± {np.std(distance):.3f} |"
+        )
+
+    for budget in [None, *(env_steps or [])]:
+        for task, methods in summary.items():
+            for method, res in methods.items():
+                seeds = res["per_seed"]
+                if budget is None:
+                    at = [len(steps) - 1 for steps in seeds["env_steps"]]
+                elif all(budget in steps for steps in seeds["env_steps"]):
+                    at = [steps.index(budget) for steps in seeds["env_steps"]]
+                else:
+                    continue
+                success = [v[i] for v, i in zip(seeds["eval_success_rate"], at, strict=True)]
+                distance = [v[i] for v, i in zip(seeds["eval_final_distance"], at, strict=True)]
+                steps = res["final_env_steps"] if budget is None else budget
+                lines.append(row(task, method, res["n_seeds"], steps, success, distance))
     return "\n".join(lines)
 
 
@@ -279,8 +326,9 @@ def main() -> None:
         meta = {**old, "replotted_with": meta["command"]}
     (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
     plot(summary, cfg.out / "comparison.png", start_distances(cfg.out, cfg.tasks))
-    (cfg.out / "table.md").write_text(table(summary) + "\n")
-    print(table(summary))
+    text = table(summary, cfg.table_env_steps)
+    (cfg.out / "table.md").write_text(text + "\n")
+    print(text)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+import pytest
 
 import lerobot_indicator  # noqa: F401  (registers the gym ids)
 from lerobot_indicator.training.online import EVAL_SEED_OFFSET
@@ -116,3 +117,60 @@ def test_eval_goals_on_a_trained_checkpoint(tmp_path):
         assert row["success"] == (row["final_distance"] <= 0.05)
     assert record["success_rate"] == np.mean([r["success"] for r in record["episodes"]])
     assert set(record["input_stats"]) == {"observation.state"}
+
+
+def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
+    """Runs of different lengths compare at a shared env-step budget; a metric missing from early rows (added
+    mid-run) and the filter's precision in cycles that filtered nothing are NaN, not zeros averaged in."""
+    experiments = _import_script("experiments")
+    cfg = experiments.ExperimentConfig(
+        tasks=["rope_state"],
+        methods=["indicator", "indicator_balance_filter"],
+        seeds=[0, 1],
+        runs_dir=tmp_path,
+    )
+    curves = {  # method -> seed -> eval distances at env steps 100, 200, (300)
+        "indicator": {0: [0.6, 0.5], 1: [0.7, 0.3]},
+        "indicator_balance_filter": {0: [0.6, 0.4, 0.2], 1: [0.8, 0.6, 0.4]},
+    }
+    for method, seeds in curves.items():
+        for seed, distances in seeds.items():
+            rows = []
+            for i, d in enumerate(distances):
+                row = {
+                    "step": i,
+                    "env_steps": 100 * (i + 1),
+                    "wall_time_s": 1.0,
+                    "eval_success_rate": float(d < 0.35),
+                }
+                row |= {"eval_final_distance": d, "frac_filtered": 0.1 * i}
+                if i > 0:  # logged from the second cycle on; the first filtered nothing anyway
+                    row["filtered_gt_success_rate"] = 0.25 * (seed + 1)
+                rows.append(row)
+            out = experiments.run_dir(cfg, "rope_state", method, seed)
+            out.mkdir(parents=True)
+            (out / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+    summary = experiments.aggregate(cfg, "rope_state")
+    ibf = summary["indicator_balance_filter"]
+    assert ibf["final_env_steps"] == 300
+    assert ibf["final_distance"]["mean"] == pytest.approx(0.3)
+    precision = ibf["series"]["filtered_gt_success_rate"]["mean"]
+    assert precision[0] is None and precision[1:] == pytest.approx([0.375, 0.375])
+
+    text = experiments.table({"rope_state": summary}, env_steps=[200, 300])
+    rows = [line for line in text.splitlines() if line.startswith("| rope_state")]
+    assert rows[0].split("|")[4:7] == [" 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 "]  # Indicator, final
+    assert rows[1].split("|")[4:7] == [" 300 ", " 0.50 ± 0.50 ", " 0.300 ± 0.100 "]  # I+B+F, final
+    assert rows[2].split("|")[4:7] == [" 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 "]  # Indicator at 200
+    assert rows[3].split("|")[4:7] == [" 200 ", " 0.00 ± 0.00 ", " 0.500 ± 0.100 "]  # I+B+F at 200
+    assert rows[4].split("|")[2:7] == [
+        " Indicator+Balance+Filter ",
+        " 2 ",
+        " 300 ",
+        " 0.50 ± 0.50 ",
+        " 0.300 ± 0.100 ",
+    ]
+    assert len(rows) == 5  # Indicator never reached 300 env steps: no row for it there
+    experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
+    assert (tmp_path / "comparison.png").stat().st_size > 0

@@ -86,27 +86,37 @@ def test_eval_goals_flags_goals_the_encoder_clips():
     assert flagged == [["observation.state[2]"], ["observation.images.front[2]"]]
 
 
-def test_eval_goals_on_a_trained_checkpoint(tmp_path):
-    env_args = ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]
+REACH_ARGS = ["--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=5"]
+SCRIPT_ENV = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory) -> Path:
+    """A 5-update online run on 5-step reach episodes (checkpoint and replay chunks kept)."""
+    run = tmp_path_factory.mktemp("trained") / "run"
     train = [
         str(Path(sys.executable).parent / "lerobot-indicator-train"),
-        *env_args,
+        *REACH_ARGS,
         "--policy.type=indicator_ddpg",
         "--policy.push_to_hub=false",
         "--policy.device=cpu",
         "--online.n_envs=1",
         "--online.use_async_envs=false",
-        "--online.episodes_per_cycle=1",
+        "--online.episodes_per_cycle=4",
         "--online.updates_per_cycle=5",
         "--online.batch_size=16",
         "--online.eval_episodes=1",
         "--steps=5",
-        f"--output_dir={tmp_path / 'run'}",
+        f"--output_dir={run}",
     ]
-    env = {**os.environ, "MUJOCO_GL": "egl", "HF_HUB_OFFLINE": "1"}
-    subprocess.run(train, cwd=ROOT, check=True, env=env, capture_output=True)
+    subprocess.run(train, cwd=ROOT, check=True, env=SCRIPT_ENV, capture_output=True)
+    return run
+
+
+def test_eval_goals_on_a_trained_checkpoint(trained_run, tmp_path):
+    env_args, env = REACH_ARGS, SCRIPT_ENV
     out = tmp_path / "eval_goals.json"
-    policy_path = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
+    policy_path = trained_run / "checkpoints" / "last" / "pretrained_model"
     cmd = [sys.executable, "scripts/eval_goals.py", *env_args, f"--policy_path={policy_path}", "--episodes=2"]
     subprocess.run([*cmd, f"--out={out}"], cwd=ROOT, check=True, env=env, capture_output=True)
     record = json.loads(out.read_text())
@@ -174,3 +184,30 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     assert len(rows) == 5  # Indicator never reached 300 env steps: no row for it there
     experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0
+
+
+def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):
+    """Per-source counts add up, o_{t+1} goals are always indicator and ground-truth positives, recorded goals
+    are never indicator positives here, and what the filter drops is a subset of the R- transitions."""
+    diagnostics = _import_script("filter_diagnostics")
+    cfg = diagnostics.FilterDiagnosticsConfig(
+        run_dirs=[trained_run], batches=3, batch_size=64, out=tmp_path / "fd.json"
+    )
+    record = diagnostics.main(cfg)
+    assert json.loads((tmp_path / "fd.json").read_text()) == json.loads(json.dumps(record))
+    (run,) = record["runs"].values()
+    assert list(run["steps"]) == [5] and run["balance"] and run["filter"]
+    stats = run["steps"][5]
+    assert stats["all"]["samples"] == 3 * 64
+    for key in ("samples", "positive", "gt_success", "dropped", "dropped_gt_success"):
+        assert sum(stats[s][key] for s in ("next", "future", "recorded")) == stats["all"][key]
+    nxt, recorded = stats["next"], stats["recorded"]
+    assert nxt["samples"] > 0 and nxt["positive"] == nxt["gt_success"] == nxt["samples"]
+    assert nxt["dropped"] == 0  # positives are never filtered
+    assert recorded["samples"] > 0 and recorded["positive"] == 0  # a reach goal is never hit bit for bit
+    for source in stats.values():
+        assert source["dropped"] <= source["samples"] - source["positive"]
+        assert source["dropped_gt_success"] <= min(source["dropped"], source["gt_success"])
+
+    with pytest.raises(ValueError, match="run_dirs"):
+        diagnostics.main(diagnostics.FilterDiagnosticsConfig())

@@ -97,6 +97,16 @@ def to_transition_batch(
     return batch
 
 
+def add_replay_chunk(buffer: EpisodeReplayBuffer, chunk: dict[str, np.ndarray]) -> None:
+    """Add the episodes of one ``replay/cycle_*.npz`` chunk (written by ``OnlineTrainer._append_replay``)."""
+    obs = {k[4:]: v for k, v in chunk.items() if k.startswith("obs/")}
+    for i in range(chunk["actions"].shape[0]):
+        gt = None
+        if "gt_achieved" in chunk:
+            gt = {"gt_achieved_goal": chunk["gt_achieved"][i], "gt_desired_goal": chunk["gt_desired"][i]}
+        buffer.add_episode({k: v[i] for k, v in obs.items()}, chunk["actions"][i], gt)
+
+
 class OnlineTrainer:
     """Owns the env, policy, optimizer, buffer and the run directory of one online training run."""
 
@@ -238,7 +248,7 @@ class OnlineTrainer:
             seed_buffer(self.buffer, self.cfg.dataset, stored_keys(self.keys))
         for name, _ in files:
             with np.load(self.out / REPLAY_DIR / name) as chunk:
-                self._add_chunk(dict(chunk))
+                add_replay_chunk(self.buffer, dict(chunk))
         metrics = self.out / METRICS_FILE
         if metrics.exists():  # drop lines written after the state we resume from
             lines = [
@@ -267,14 +277,6 @@ class OnlineTrainer:
         oldest_kept = self.buffer.total_episodes_added - self.buffer.capacity
         while len(self.progress.replay_files) > 1 and self.progress.replay_files[1][1] <= oldest_kept:
             (self.out / REPLAY_DIR / self.progress.replay_files.pop(0)[0]).unlink(missing_ok=True)
-
-    def _add_chunk(self, chunk: dict[str, np.ndarray]) -> None:
-        obs = {k[4:]: v for k, v in chunk.items() if k.startswith("obs/")}
-        for i in range(chunk["actions"].shape[0]):
-            gt = None
-            if "gt_achieved" in chunk:
-                gt = {"gt_achieved_goal": chunk["gt_achieved"][i], "gt_desired_goal": chunk["gt_desired"][i]}
-            self.buffer.add_episode({k: v[i] for k, v in obs.items()}, chunk["actions"][i], gt)
 
     # ---------------- the loop ----------------
     def _episodes(self, seeds: list[int], explore: bool, **kwargs) -> Rollouts:

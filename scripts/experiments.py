@@ -194,8 +194,7 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
         final_success = [r[n - 1]["eval_success_rate"] for r in runs]
         final_distance = [r[n - 1]["eval_final_distance"] for r in runs]
         result[method] = {
-            "per_seed": {
-                "env_steps": [[row["env_steps"] for row in r[:n]] for r in runs],
+            "per_seed": {  # at the shared eval points ``env_steps``
                 "eval_success_rate": [[row["eval_success_rate"] for row in r[:n]] for r in runs],
                 "eval_final_distance": [[row["eval_final_distance"] for row in r[:n]] for r in runs],
             },
@@ -271,34 +270,30 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
     plt.close(fig)
 
 
-def table(summary: dict, env_steps: list[int] | None = None) -> str:
-    """Final success and distance (mean ± std over seeds) per method, then the same at each of ``env_steps``
-    for the methods whose runs all reached it."""
+def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) -> str:
+    """Success and final distance (mean ± std over seeds) per method at its last evaluation, then at each of
+    ``env_steps`` for the methods that reached it; the last column averages each seed's final distance over
+    the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy)."""
     lines = [
-        "| task | method | seeds | env steps | success rate | final distance |",
-        "|---|---|---|---|---|---|",
+        f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals |",
+        "|---|---|---|---|---|---|---|",
     ]
-
-    def row(task: str, method: str, n_seeds: int, steps: int, success: list, distance: list) -> str:
-        return (
-            f"| {task} | {LABELS[method]} | {n_seeds} | {steps} | {np.mean(success):.2f} ± {np.std(success):.2f}"
-            f" | {np.mean(distance):.3f} ± {np.std(distance):.3f} |"
-        )
-
     for budget in [None, *(env_steps or [])]:
         for task, methods in summary.items():
             for method, res in methods.items():
-                seeds = res["per_seed"]
-                if budget is None:
-                    at = [len(steps) - 1 for steps in seeds["env_steps"]]
-                elif all(budget in steps for steps in seeds["env_steps"]):
-                    at = [steps.index(budget) for steps in seeds["env_steps"]]
-                else:
+                steps = res["env_steps"]
+                if budget is not None and budget not in steps:
                     continue
-                success = [v[i] for v, i in zip(seeds["eval_success_rate"], at, strict=True)]
-                distance = [v[i] for v, i in zip(seeds["eval_final_distance"], at, strict=True)]
-                steps = res["final_env_steps"] if budget is None else budget
-                lines.append(row(task, method, res["n_seeds"], steps, success, distance))
+                i = len(steps) - 1 if budget is None else steps.index(budget)
+                seeds = res["per_seed"]
+                success = [v[i] for v in seeds["eval_success_rate"]]
+                distance = [v[i] for v in seeds["eval_final_distance"]]
+                recent = [np.mean(v[max(0, i - window + 1) : i + 1]) for v in seeds["eval_final_distance"]]
+                lines.append(
+                    f"| {task} | {LABELS[method]} | {res['n_seeds']} | {steps[i]} | "
+                    f"{np.mean(success):.2f} ± {np.std(success):.2f} | {np.mean(distance):.3f} ± {np.std(distance):.3f}"
+                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} |"
+                )
     return "\n".join(lines)
 
 

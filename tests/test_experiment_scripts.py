@@ -168,19 +168,15 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     precision = ibf["series"]["filtered_gt_success_rate"]["mean"]
     assert precision[0] is None and precision[1:] == pytest.approx([0.375, 0.375])
 
-    text = experiments.table({"rope_state": summary}, env_steps=[200, 300])
-    rows = [line for line in text.splitlines() if line.startswith("| rope_state")]
-    assert rows[0].split("|")[4:7] == [" 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 "]  # Indicator, final
-    assert rows[1].split("|")[4:7] == [" 300 ", " 0.50 ± 0.50 ", " 0.300 ± 0.100 "]  # I+B+F, final
-    assert rows[2].split("|")[4:7] == [" 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 "]  # Indicator at 200
-    assert rows[3].split("|")[4:7] == [" 200 ", " 0.00 ± 0.00 ", " 0.500 ± 0.100 "]  # I+B+F at 200
-    assert rows[4].split("|")[2:7] == [
-        " Indicator+Balance+Filter ",
-        " 2 ",
-        " 300 ",
-        " 0.50 ± 0.50 ",
-        " 0.300 ± 0.100 ",
-    ]
+    text = experiments.table({"rope_state": summary}, env_steps=[200, 300], window=2)
+    rows = [line.split("|")[2:8] for line in text.splitlines() if line.startswith("| rope_state")]
+    ind, ibf = " Indicator ", " Indicator+Balance+Filter "
+    # last-2 window: Indicator seeds (0.55, 0.5) at 200; I+B+F seeds (0.3, 0.5) at 300, (0.5, 0.7) at 200
+    assert rows[0] == [ind, " 2 ", " 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 ", " 0.525 ± 0.025 "]  # final
+    assert rows[1] == [ibf, " 2 ", " 300 ", " 0.50 ± 0.50 ", " 0.300 ± 0.100 ", " 0.400 ± 0.100 "]  # final
+    assert rows[2] == [ind, " 2 ", " 200 ", " 0.50 ± 0.50 ", " 0.400 ± 0.100 ", " 0.525 ± 0.025 "]  # at 200
+    assert rows[3] == [ibf, " 2 ", " 200 ", " 0.00 ± 0.00 ", " 0.500 ± 0.100 ", " 0.600 ± 0.100 "]  # at 200
+    assert rows[4] == [ibf, " 2 ", " 300 ", " 0.50 ± 0.50 ", " 0.300 ± 0.100 ", " 0.400 ± 0.100 "]  # at 300
     assert len(rows) == 5  # Indicator never reached 300 env steps: no row for it there
     experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0

@@ -42,18 +42,27 @@ METHODS: dict[str, list[str]] = {
         "--policy.filter=true",
     ],
 }
+PAPER_METHODS = list(METHODS)
+# Not in the paper: balancing with o_{t+1} (not the recorded goal) where t = T-1 has no t' >= t+2.
+VARIANTS = {
+    f"{m}_next_fallback": [*METHODS[m], "--policy.balance_fallback=next"]
+    for m in ("indicator_balance", "indicator_balance_filter")
+}
+METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
     "indicator": "Indicator",
     "indicator_balance": "Indicator+Balance",
     "indicator_filter": "Indicator+Filter",
     "indicator_balance_filter": "Indicator+Balance+Filter",
+    "indicator_balance_next_fallback": "Indicator+Balance (t=T-1: o_{t+1})",
+    "indicator_balance_filter_next_fallback": "Indicator+Balance+Filter (t=T-1: o_{t+1})",
 }
 # Panels that only mean something for some methods (default: every method with the series).
 PANEL_METHODS = {
     "reward_accuracy": [m for m in METHODS if m != "oracle"],
     "false_negative_rate_kept": [m for m in METHODS if m != "oracle"],
-    "filtered_gt_success_rate": ["indicator_filter", "indicator_balance_filter"],
+    "filtered_gt_success_rate": [m for m in METHODS if "filter" in m],
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -62,6 +71,8 @@ STYLES = {
     "indicator_balance": ("tab:green", "--"),
     "indicator_filter": ("tab:red", ":"),
     "indicator_balance_filter": ("tab:purple", "-."),
+    "indicator_balance_next_fallback": ("tab:olive", "--"),
+    "indicator_balance_filter_next_fallback": ("tab:brown", "-."),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 
@@ -89,14 +100,22 @@ TASKS: dict[str, TaskPreset] = {
         400,
         20,
     ),
-    "rope_rgbd": TaskPreset(["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 8, 400, 10),
+    # Paper appendix B: RopePush's image encoder ends in a spatial softmax (32 keypoints).
+    "rope_rgbd": TaskPreset(
+        ["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS, "--policy.spatial_softmax=true"],
+        2000,
+        40,
+        8,
+        400,
+        10,
+    ),
 }
 
 
 @dataclass
 class ExperimentConfig:
     tasks: list[str] = field(default_factory=lambda: ["reach_state"])
-    methods: list[str] = field(default_factory=lambda: list(METHODS))
+    methods: list[str] = field(default_factory=lambda: list(PAPER_METHODS))
     seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
     # Summary, plot and table (small; commit them). Run directories (checkpoints, replay) go to runs_dir.
     out: Path = Path("outputs/experiments")
@@ -272,7 +291,7 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
 
 def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) -> str:
     """Success and final distance (mean ± std over seeds) per method at its last evaluation, then at each of
-    ``env_steps`` for the methods that reached it; the last column averages each seed's final distance over
+    ``env_steps`` for the methods that went past it; the last column averages each seed's final distance over
     the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy)."""
     lines = [
         f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals |",
@@ -282,8 +301,8 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
         for task, methods in summary.items():
             for method, res in methods.items():
                 steps = res["env_steps"]
-                if budget is not None and budget not in steps:
-                    continue
+                if budget is not None and (budget not in steps or budget == steps[-1]):
+                    continue  # not reached, or already the final row
                 i = len(steps) - 1 if budget is None else steps.index(budget)
                 seeds = res["per_seed"]
                 success = [v[i] for v in seeds["eval_success_rate"]]

@@ -77,6 +77,19 @@ def test_no_future_falls_back_to_recorded_goal_when_balanced_and_next_when_not()
     assert fractions(unbalanced.source) == pytest.approx([0.9, 0.0, 0.1], abs=0.02)
 
 
+def test_balance_fallback_next_uses_o_next_only_where_no_future_exists():
+    n = 10_000
+    has_future = torch.arange(n) % 2 == 0
+    cfg = state_config(balance_fallback="next")
+    relabel = core.relabel_sources(has_future, cfg, generator=torch.Generator().manual_seed(0))
+    default = core.relabel_sources(has_future, state_config(), generator=torch.Generator().manual_seed(0))
+    assert torch.equal(relabel.branch, default.branch)  # same draws, only the fallback differs
+    assert fractions(relabel.source[~has_future]) == pytest.approx([0.9, 0.0, 0.1], abs=0.02)
+    assert torch.equal(relabel.source[has_future], default.source[has_future])
+    with pytest.raises(ValueError, match="balance_fallback"):
+        state_config(balance_fallback="future")
+
+
 def test_select_goals_takes_each_source():
     gen = torch.Generator().manual_seed(0)
     batch = transition_batch(3, gen)

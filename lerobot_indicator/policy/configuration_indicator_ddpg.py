@@ -9,6 +9,7 @@ from lerobot.utils.constants import ACTION
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 
 REWARD_MODES = ("indicator", "oracle")
+BALANCE_FALLBACKS = ("recorded", "next")
 
 
 @OptimizerConfig.register_subclass("fused_adam")
@@ -50,6 +51,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     p_next: float = 0.45
     p_future: float = 0.45
     p_future_unbalanced: float = 0.9
+    # Goal of the balanced future branch when no t' >= t+2 exists (t = T-1; the paper does not say):
+    # "recorded" keeps it a (mostly) negative example; "next" uses o_{t+1} = o_T, what clipping t' to T gives
+    # (a positive). Matters at short horizons: at T = 3 a third of the transitions have t = T-1.
+    balance_fallback: str = "recorded"
     # Reward filtering: drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
     filter: bool = True
     # Initial Q (the critic's output bias). The paper initialises Q "relatively low" so that filtering
@@ -121,6 +126,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if min(self.p_next, self.p_future) < 0 or self.p_next + self.p_future > 1:
             raise ValueError(
                 f"p_next={self.p_next}, p_future={self.p_future} are not probabilities summing <= 1"
+            )
+        if self.balance_fallback not in BALANCE_FALLBACKS:
+            raise ValueError(
+                f"balance_fallback must be one of {BALANCE_FALLBACKS}, got {self.balance_fallback!r}"
             )
         if not 0 <= self.p_future_unbalanced <= 1:
             raise ValueError(f"p_future_unbalanced must be in [0, 1], got {self.p_future_unbalanced}")

@@ -62,8 +62,8 @@ def relabel_sources(
     """Draw each transition's goal source (Algorithm 1).
 
     balance=True: o_{t+1} with p_next, o_{t'} (t' >= t+2) with p_future, the recorded goal otherwise; when no
-    t' >= t+2 exists (t = T-1) the future branch falls back to the recorded goal, which keeps that branch a
-    (mostly) negative example as in the paper.
+    t' >= t+2 exists (t = T-1) the future branch falls back to ``config.balance_fallback``: the recorded goal
+    (default: the branch stays a mostly negative example) or o_{t+1} (t' clipped to T).
     balance=False (HER-style "Indicator" baseline): with p_future_unbalanced the goal is uniform over
     {t+1} + the ``future_count`` candidates (so o_{t+1} with probability 1/(future_count+1)), else recorded.
     ``future_count`` defaults to one candidate where ``has_future``.
@@ -78,7 +78,8 @@ def relabel_sources(
             SOURCE_NEXT,
             torch.where(u < config.p_next + config.p_future, SOURCE_FUTURE, recorded),
         )
-        source = torch.where((branch == SOURCE_FUTURE) & ~has_future, SOURCE_RECORDED, branch)
+        fallback = SOURCE_NEXT if config.balance_fallback == "next" else SOURCE_RECORDED
+        source = torch.where((branch == SOURCE_FUTURE) & ~has_future, fallback, branch)
         return Relabeling(branch=branch, source=source)
 
     branch = torch.where(u < config.p_future_unbalanced, SOURCE_FUTURE, recorded)

@@ -30,22 +30,31 @@ import matplotlib.pyplot as plt  # noqa: E402
 BIN = Path(sys.executable).parent
 
 # Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
-# future step with probability 0.9 and keep the original goal otherwise (HER-style).
+# future step with probability 0.9 and keep the original goal otherwise (HER-style). Balancing names its t = T-1
+# fallback (o_{t+1}, the default) so that a run's command says what it did.
 METHODS: dict[str, list[str]] = {
     "oracle": ["--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
     "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
-    "indicator_balance": ["--policy.reward=indicator", "--policy.balance=true", "--policy.filter=false"],
+    "indicator_balance": [
+        "--policy.reward=indicator",
+        "--policy.balance=true",
+        "--policy.balance_fallback=next",
+        "--policy.filter=false",
+    ],
     "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
     "indicator_balance_filter": [
         "--policy.reward=indicator",
         "--policy.balance=true",
+        "--policy.balance_fallback=next",
         "--policy.filter=true",
     ],
 }
 PAPER_METHODS = list(METHODS)
-# Not in the paper: balancing with o_{t+1} (not the recorded goal) where t = T-1 has no t' >= t+2.
+# The other reading of balancing at t = T-1 (no t' >= t+2): the recorded goal (the default before stop 14).
 VARIANTS = {
-    f"{m}_next_fallback": [*METHODS[m], "--policy.balance_fallback=next"]
+    f"{m}_recorded_fallback": [
+        a.replace("balance_fallback=next", "balance_fallback=recorded") for a in METHODS[m]
+    ]
     for m in ("indicator_balance", "indicator_balance_filter")
 }
 METHODS.update(VARIANTS)
@@ -55,8 +64,8 @@ LABELS = {
     "indicator_balance": "Indicator+Balance",
     "indicator_filter": "Indicator+Filter",
     "indicator_balance_filter": "Indicator+Balance+Filter",
-    "indicator_balance_next_fallback": "Indicator+Balance (t=T-1: o_{t+1})",
-    "indicator_balance_filter_next_fallback": "Indicator+Balance+Filter (t=T-1: o_{t+1})",
+    "indicator_balance_recorded_fallback": "Indicator+Balance (t=T-1: recorded goal)",
+    "indicator_balance_filter_recorded_fallback": "Indicator+Balance+Filter (t=T-1: recorded goal)",
 }
 # Panels that only mean something for some methods (default: every method with the series).
 PANEL_METHODS = {
@@ -71,8 +80,8 @@ STYLES = {
     "indicator_balance": ("tab:green", "--"),
     "indicator_filter": ("tab:red", ":"),
     "indicator_balance_filter": ("tab:purple", "-."),
-    "indicator_balance_next_fallback": ("tab:olive", "--"),
-    "indicator_balance_filter_next_fallback": ("tab:brown", "-."),
+    "indicator_balance_recorded_fallback": ("tab:olive", "--"),
+    "indicator_balance_filter_recorded_fallback": ("tab:brown", "-."),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 

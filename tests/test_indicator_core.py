@@ -67,10 +67,11 @@ def test_relabel_is_reproducible_with_a_generator():
     assert torch.equal(a, b) and not torch.equal(a, c)
 
 
-def test_no_future_falls_back_to_recorded_goal_when_balanced_and_next_when_not():
+def test_no_future_falls_back_to_recorded_goal_when_asked_and_next_when_unbalanced():
     n = 10_000
     no_future = torch.zeros(n, dtype=torch.bool)
-    balanced = core.relabel_sources(no_future, state_config(), generator=torch.Generator().manual_seed(0))
+    cfg = state_config(balance_fallback="recorded")
+    balanced = core.relabel_sources(no_future, cfg, generator=torch.Generator().manual_seed(0))
     assert not (balanced.source == core.SOURCE_FUTURE).any()
     assert fractions(balanced.source) == pytest.approx([0.45, 0.0, 0.55], abs=0.02)
     unbalanced = core.relabel_sources(no_future, state_config(balance=False), generator=torch.Generator())
@@ -80,12 +81,13 @@ def test_no_future_falls_back_to_recorded_goal_when_balanced_and_next_when_not()
 def test_balance_fallback_next_uses_o_next_only_where_no_future_exists():
     n = 10_000
     has_future = torch.arange(n) % 2 == 0
-    cfg = state_config(balance_fallback="next")
-    relabel = core.relabel_sources(has_future, cfg, generator=torch.Generator().manual_seed(0))
-    default = core.relabel_sources(has_future, state_config(), generator=torch.Generator().manual_seed(0))
-    assert torch.equal(relabel.branch, default.branch)  # same draws, only the fallback differs
+    assert state_config().balance_fallback == "next"
+    relabel = core.relabel_sources(has_future, state_config(), generator=torch.Generator().manual_seed(0))
+    cfg = state_config(balance_fallback="recorded")
+    recorded = core.relabel_sources(has_future, cfg, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(relabel.branch, recorded.branch)  # same draws, only the fallback differs
     assert fractions(relabel.source[~has_future]) == pytest.approx([0.9, 0.0, 0.1], abs=0.02)
-    assert torch.equal(relabel.source[has_future], default.source[has_future])
+    assert torch.equal(relabel.source[has_future], recorded.source[has_future])
     with pytest.raises(ValueError, match="balance_fallback"):
         state_config(balance_fallback="future")
 

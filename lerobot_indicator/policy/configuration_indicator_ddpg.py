@@ -52,9 +52,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     p_future: float = 0.45
     p_future_unbalanced: float = 0.9
     # Goal of the balanced future branch when no t' >= t+2 exists (t = T-1; the paper does not say):
-    # "recorded" keeps it a (mostly) negative example; "next" uses o_{t+1} = o_T, what clipping t' to T gives
-    # (a positive). Matters at short horizons: at T = 3 a third of the transitions have t = T-1.
-    balance_fallback: str = "recorded"
+    # "next" uses o_{t+1} = o_T, what clipping t' to T gives (a positive); "recorded" keeps it a mostly negative
+    # example. Matters at short horizons: at T = 3 a third of the transitions have t = T-1, and "recorded"
+    # made rope push worse than no balancing at all (docs/results/README.md).
+    balance_fallback: str = "next"
     # Reward filtering: drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
     filter: bool = True
     # Initial Q (the critic's output bias). The paper initialises Q "relatively low" so that filtering

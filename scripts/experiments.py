@@ -271,8 +271,9 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
         ("filtered_gt_success_rate", "filter precision P(success | filtered)"),
     )
     fig, axes = plt.subplots(
-        len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary)), squeeze=False
+        len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary) + 0.7), squeeze=False
     )
+    legend: dict[str, object] = {}  # one legend for the figure: label -> handle
     for row, (task, methods) in zip(axes, summary.items(), strict=True):
         for ax, (key, label) in zip(row, panels, strict=True):
             for method, res in methods.items():
@@ -280,31 +281,42 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
                     continue
                 x = np.array(res["env_steps"])
                 mean, std = (np.array(res["series"][key][s], dtype=float) for s in ("mean", "std"))
+                if np.isnan(mean).all():
+                    continue
                 color, dash = STYLES[method]
-                ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
+                (line,) = ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
                 ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
+                legend.setdefault(LABELS[method], line)
             if key == "eval_final_distance" and task in (reference or {}):
-                ax.axhline(
-                    reference[task], color="grey", ls=":", lw=1.5, label="no movement (start distance)"
-                )
+                line = ax.axhline(reference[task], color="grey", ls=":", lw=1.5)
+                legend.setdefault("no movement (start distance)", line)
+            if not ax.lines:
+                why = "nothing was filtered" if key == "filtered_gt_success_rate" else "not logged"
+                ax.text(0.5, 0.5, f"no data: {why}", ha="center", transform=ax.transAxes)
             ax.set_title(f"{task}: {label}")
             ax.set_xlabel("environment steps")
             ax.set_ylabel(label)
             ax.grid(alpha=0.3)
-            if ax.lines:
-                ax.legend(fontsize=8)
-    fig.tight_layout()
+    ncol = 4
+    fig.legend(legend.values(), legend.keys(), loc="lower center", ncol=ncol, fontsize=9, frameon=False)
+    legend_inches = 0.1 + 0.22 * -(-len(legend) // ncol)
+    fig.tight_layout(rect=(0, legend_inches / fig.get_figheight(), 1, 1))
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+SOLVED = 0.9  # the success rate the table's speed column waits for (mean curve over seeds)
 
 
 def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) -> str:
     """Success and final distance (mean ± std over seeds) per method at its last evaluation, then at each of
     ``env_steps`` for the methods that went past it; the last column averages each seed's final distance over
-    the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy)."""
+    the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy), and the first evaluation
+    where the mean success over seeds reached ``SOLVED`` (learning speed, what the reach comparison measures)."""
     lines = [
-        f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals |",
-        "|---|---|---|---|---|---|---|",
+        f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals "
+        f"| first env steps with mean success >= {SOLVED} |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for budget in [None, *(env_steps or [])]:
         for task, methods in summary.items():
@@ -317,10 +329,12 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
                 success = [v[i] for v in seeds["eval_success_rate"]]
                 distance = [v[i] for v in seeds["eval_final_distance"]]
                 recent = [np.mean(v[max(0, i - window + 1) : i + 1]) for v in seeds["eval_final_distance"]]
+                mean_success = np.mean(seeds["eval_success_rate"], axis=0)[: i + 1]
+                solved = [x for x, m in zip(steps, mean_success, strict=False) if m >= SOLVED]
                 lines.append(
                     f"| {task} | {LABELS[method]} | {res['n_seeds']} | {steps[i]} | "
                     f"{np.mean(success):.2f} ± {np.std(success):.2f} | {np.mean(distance):.3f} ± {np.std(distance):.3f}"
-                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} |"
+                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} | {solved[0] if solved else '-'} |"
                 )
     return "\n".join(lines)
 

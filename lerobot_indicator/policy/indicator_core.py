@@ -62,8 +62,8 @@ def relabel_sources(
     """Draw each transition's goal source (Algorithm 1).
 
     balance=True: o_{t+1} with p_next, o_{t'} (t' >= t+2) with p_future, the recorded goal otherwise; when no
-    t' >= t+2 exists (t = T-1) the future branch falls back to ``config.balance_fallback``: the recorded goal
-    (default: the branch stays a mostly negative example) or o_{t+1} (t' clipped to T).
+    t' >= t+2 exists (t = T-1) the future branch falls back to ``config.balance_fallback``: o_{t+1} (default;
+    t' clipped to T) or the recorded goal (the branch stays a mostly negative example).
     balance=False (HER-style "Indicator" baseline): with p_future_unbalanced the goal is uniform over
     {t+1} + the ``future_count`` candidates (so o_{t+1} with probability 1/(future_count+1)), else recorded.
     ``future_count`` defaults to one candidate where ``has_future``.

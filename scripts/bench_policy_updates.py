@@ -1,95 +1,60 @@
-"""Gradient updates/s of ``indicator_ddpg`` (loss + backward + Adam step + target update), no data loading.
+"""Gradient updates/s of ``indicator_ddpg`` beside LeRobot 0.6.1's SAC, FLOPs per update and the CPU's peak.
 
-Two settings of the paper's appendix: state inputs with batch 256, and 100x100 RGB-D inputs with batch 128
-(4 conv layers + 3x256). ``--dataset-cost`` also times what fetching future frames costs in lerobot-train:
-``LeRobotDataset.__getitem__`` on a synthetic 100x100 RGB-D dataset (lossless image storage) with
-``observation_delta_indices`` = [0] (no relabeling), [0, 1, 2] (one future offset) and the default
-[0, 1, 2, 4, 8, 16]. Writes a JSON record (default ``docs/results/policy_updates.json``).
+RGB-D arms at 64 and 100 px, batch 128, timed in one interleaved run (``lerobot_indicator.bench``): the
+paper's encoder, the default ("drq") encoder, each also with float32 convs, and LeRobot's SAC
+(``gaussian_actor`` + ``SACAlgorithm``) on the same image size and batch, with its convs trained (as ours)
+and frozen (its config default); plus the state-based update (batch 256). For each arm the matmul/conv FLOPs
+of one update and their share of the measured peak. ``--dataset-cost`` also times what fetching future frames
+costs in lerobot-train. Writes a JSON record (default ``docs/results/policy_updates.json``).
 
-    python scripts/bench_policy_updates.py [--device cpu] [--seconds 20] [--dataset-cost] [--compile] [--out ...]
+    python scripts/bench_policy_updates.py [--device cpu] [--seconds 9] [--threads 1] [--dataset-cost]
 """
 
 import argparse
 import json
 import os
 import platform
+import shlex
+import sys
 import time
 from pathlib import Path
 
 import torch
-from lerobot.configs import FeatureType, PolicyFeature
 
-from lerobot_indicator.keys import goal_key
-from lerobot_indicator.policy import indicator_core as core
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
+from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
+from lerobot_indicator.bench.updates import (
+    STATE_FEATURES,
+    interleaved_rates,
+    make_batch,
+    make_policy,
+    policy_update,
+    rgbd_features,
+)
+from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
 
-SETTINGS = {
-    "state_b256": {"batch_size": 256, "features": {"observation.state": (FeatureType.STATE, (3,))}},
-    "rgbd_100x100_b128": {
-        "batch_size": 128,
-        "features": {
-            "observation.images.front": (FeatureType.VISUAL, (3, 100, 100)),
-            "observation.images.front_depth": (FeatureType.VISUAL, (1, 100, 100)),
-        },
-    },
+ENCODERS = {
+    "paper": {"image_encoder": "paper"},
+    "paper_fp32": {"image_encoder": "paper", "conv_precision": "float32"},
+    "drq": {"image_encoder": "drq"},
+    "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
 }
 
 
-def make_policy(features: dict, device: str, compile_model: bool = False) -> IndicatorDDPGPolicy:
-    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), compile_model=compile_model)
-    cfg.input_features = {}
-    for key, (ftype, shape) in features.items():
-        cfg.input_features[key] = cfg.input_features[goal_key(key)] = PolicyFeature(ftype, shape)
-    cfg.output_features = {"action": PolicyFeature(FeatureType.ACTION, (3,))}
-    return IndicatorDDPGPolicy(cfg).to(device)
-
-
-def make_batch(features: dict, batch_size: int, device: str) -> dict[str, torch.Tensor]:
-    batch = {
-        "action": torch.rand(batch_size, 3) * 2 - 1,
-        core.HAS_FUTURE: torch.ones(batch_size, dtype=torch.bool),
-    }
-    for key, (_, shape) in features.items():
-        for name in (key, core.NEXT + key, core.FUTURE + key, goal_key(key)):
-            batch[name] = torch.rand(batch_size, *shape)
-    return {k: v.to(device) for k, v in batch.items()}
-
-
-def bench(name: str, device: str, seconds: float, compile_model: bool = False) -> dict:
-    setting = SETTINGS[name]
-    policy = make_policy(setting["features"], device, compile_model)
-    batch = make_batch(setting["features"], setting["batch_size"], device)
-    optimizer = policy.config.get_optimizer_preset().build(policy.get_optim_params())
-
-    def step() -> None:
-        loss, _ = policy.forward(batch)
-        loss.backward()
-        optimizer.step()
-        optimizer.zero_grad()
-        policy.update()
-
-    t0 = time.perf_counter()
-    for _ in range(3):  # warm-up (and compilation)
-        step()
-    warmup_s = time.perf_counter() - t0
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
-    n, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        step()
-        n += 1
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
-    elapsed = time.perf_counter() - start
-    return {
-        "batch_size": setting["batch_size"],
-        "updates": n,
-        "seconds": elapsed,
-        "updates_per_s": n / elapsed,
-        "compile_model": compile_model,
-        "warmup_s": warmup_s,
-    }
+def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
+    arms = {}
+    for size in sizes:
+        features = rgbd_features(size)
+        batch = make_batch(features, batch_size, device)
+        for name, config in ENCODERS.items():
+            arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config), batch)
+        arms[f"lerobot_sac_{size}px"] = make_sac_update(
+            (4, size, size), batch_size, device, freeze_vision_encoder=False
+        )
+        arms[f"lerobot_sac_frozen_convs_{size}px"] = make_sac_update((4, size, size), batch_size, device)
+    arms["state_b256"] = policy_update(
+        make_policy(STATE_FEATURES, device), make_batch(STATE_FEATURES, 256, device)
+    )
+    return arms
 
 
 def make_rgbd_dataset(root: Path, episodes: int = 4, horizon: int = 25) -> Path:
@@ -174,38 +139,61 @@ def cpu_model() -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu")
-    parser.add_argument("--seconds", type=float, default=20.0)
+    parser.add_argument("--seconds", type=float, default=9.0, help="per arm, split over 3 interleaved rounds")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[64, 100])
+    parser.add_argument("--batch-size", type=int, default=128)
     parser.add_argument("--dataset-cost", action="store_true")
     parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (default: torch's)")
     parser.add_argument("--out", type=Path, default=Path("docs/results/policy_updates.json"))
-    parser.add_argument("--compile", action="store_true", help="also time --policy.compile_model=true")
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    results = {name: bench(name, args.device, args.seconds) for name in SETTINGS}
-    if args.compile:
-        results |= {f"{name}_compiled": bench(name, args.device, args.seconds, True) for name in SETTINGS}
+    arms = make_arms(args.device, args.sizes, args.batch_size)
+    flops = {name: matmul_conv_flops(step) for name, step in arms.items()}
+    results = interleaved_rates(arms, args.seconds)
+    peaks = measure_peaks(device=args.device)
+    peak = max(peaks.values())
+    for name, r in results.items():
+        r["gflop_per_update"] = flops[name] / 1e9
+        r["gflop_per_s"] = flops[name] / 1e9 * r["updates_per_s"]
+        r["share_of_best_measured_peak"] = r["gflop_per_s"] / peak
+    ratios = {}
+    for size in args.sizes:
+        rate = {name: results[f"{name}_{size}px"]["updates_per_s"] for name in (*ENCODERS, "lerobot_sac")}
+        ratios[f"{size}px"] = {
+            "drq_over_paper": rate["drq"] / rate["paper"],
+            "drq_over_paper_fp32": rate["drq"] / rate["paper_fp32"],
+            "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
+            "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
+        }
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()
     record = {
+        "command": shlex.join(["python", *sys.argv]),
         "device": args.device,
         "device_name": device_name,
+        "native_bf16": native_bf16(torch.device(args.device).type),
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
         "load_average_1_5_15_min_after": os.getloadavg(),
         "torch": torch.__version__,
+        "batch_size": args.batch_size,
+        "peaks_gflop_per_s": peaks,
+        "ratios": ratios,
         "results": results,
     }
     for name, r in results.items():
-        print(f"{name}: {r['updates_per_s']:.1f} updates/s ({r['updates']} in {r['seconds']:.1f} s)")
+        print(
+            f"{name}: {r['updates_per_s']:.2f} updates/s, {r['gflop_per_update']:.1f} GFLOP/update, "
+            f"{100 * r['share_of_best_measured_peak']:.0f}% of peak"
+        )
+    print(json.dumps(ratios, indent=1))
     if args.dataset_cost:
         record["dataset_getitem_rgbd_100x100"] = bench_dataset(args.seconds)
         for deltas, r in record["dataset_getitem_rgbd_100x100"].items():
             print(f"dataset deltas {deltas}: {r['samples_per_s']:.1f} samples/s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     existing = json.loads(args.out.read_text()) if args.out.exists() else {}
-    existing[f"{args.device if args.device == 'cpu' else device_name}_threads{torch.get_num_threads()}"] = (
-        record
-    )
+    existing[f"{device_name}_threads{torch.get_num_threads()}"] = record
     args.out.write_text(json.dumps(existing, indent=2) + "\n")
 
 

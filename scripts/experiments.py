@@ -24,100 +24,18 @@ import draccus
 import matplotlib
 import numpy as np
 
+from lerobot_indicator.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 BIN = Path(sys.executable).parent
 
-# Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
-# future step with probability 0.9 and keep the original goal otherwise (HER-style). Balancing names its t = T-1
-# fallback (o_{t+1}, the default) so that a run's command says what it did.
-METHODS: dict[str, list[str]] = {
-    "oracle": ["--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
-    "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
-    "indicator_balance": [
-        "--policy.reward=indicator",
-        "--policy.balance=true",
-        "--policy.balance_fallback=next",
-        "--policy.filter=false",
-    ],
-    "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
-    "indicator_balance_filter": [
-        "--policy.reward=indicator",
-        "--policy.balance=true",
-        "--policy.balance_fallback=next",
-        "--policy.filter=true",
-    ],
-}
-PAPER_METHODS = list(METHODS)
-# The other reading of balancing at t = T-1 (no t' >= t+2): the recorded goal (the default before stop 14).
-VARIANTS = {
-    f"{m}_recorded_fallback": [
-        a.replace("balance_fallback=next", "balance_fallback=recorded") for a in METHODS[m]
-    ]
-    for m in ("indicator_balance", "indicator_balance_filter")
-}
-METHODS.update(VARIANTS)
-LABELS = {
-    "oracle": "Oracle",
-    "indicator": "Indicator",
-    "indicator_balance": "Indicator+Balance",
-    "indicator_filter": "Indicator+Filter",
-    "indicator_balance_filter": "Indicator+Balance+Filter",
-    "indicator_balance_recorded_fallback": "Indicator+Balance (t=T-1: recorded goal)",
-    "indicator_balance_filter_recorded_fallback": "Indicator+Balance+Filter (t=T-1: recorded goal)",
-}
 # Panels that only mean something for some methods (default: every method with the series).
 PANEL_METHODS = {
     "reward_accuracy": [m for m in METHODS if m != "oracle"],
     "false_negative_rate_kept": [m for m in METHODS if m != "oracle"],
     "filtered_gt_success_rate": [m for m, args in METHODS.items() if "--policy.filter=true" in args],
-}
-# Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
-STYLES = {
-    "oracle": ("tab:blue", "-"),
-    "indicator": ("tab:orange", "-"),
-    "indicator_balance": ("tab:green", "--"),
-    "indicator_filter": ("tab:red", ":"),
-    "indicator_balance_filter": ("tab:purple", "-."),
-    "indicator_balance_recorded_fallback": ("tab:olive", "--"),
-    "indicator_balance_filter_recorded_fallback": ("tab:brown", "-."),
-}
-RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
-
-
-@dataclass
-class TaskPreset:
-    env_args: list[str]
-    steps: int
-    updates_per_cycle: int
-    episodes_per_cycle: int
-    env_eval_freq: int
-    eval_episodes: int = 20
-
-
-TASKS: dict[str, TaskPreset] = {
-    "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 1600, 40, 4, 200),
-    "reach_rgbd": TaskPreset(
-        ["--env.type=sawyer_reach", "--env.obs_type=rgbd", RGBD_KEYS], 2000, 40, 4, 400, 10
-    ),
-    "rope_state": TaskPreset(
-        ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
-        6000,
-        40,
-        8,
-        400,
-        20,
-    ),
-    # Paper appendix B: RopePush's image encoder ends in a spatial softmax (32 keypoints).
-    "rope_rgbd": TaskPreset(
-        ["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS, "--policy.spatial_softmax=true"],
-        2000,
-        40,
-        8,
-        400,
-        10,
-    ),
 }
 
 

@@ -10,6 +10,27 @@ from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 
 REWARD_MODES = ("indicator", "oracle")
 BALANCE_FALLBACKS = ("recorded", "next")
+# Per image encoder: the values of the conv and augmentation fields left at None. "paper": the appendix's
+# 4 conv layers of 2x2 kernels, stride 2, 16/32/64/64 filters (as in the authors' HER code), no augmentation.
+# "drq": DrQ-v2's 3x3 convs and 4-pixel random shift, with a second stride-2 layer and 16 filters in the first
+# two layers (DrQ-v2: 32 everywhere, strides 2/1/1/1), which cut the CPU cost of an update ~3x at 64-100 px
+# (docs/policy.md).
+ENCODER_PRESETS = {
+    "paper": {
+        "conv_channels": [16, 32, 64, 64],
+        "conv_kernel_size": 2,
+        "conv_strides": [2, 2, 2, 2],
+        "augment_pad": 0,
+    },
+    "drq": {
+        "conv_channels": [16, 16, 32, 32],
+        "conv_kernel_size": 3,
+        "conv_strides": [2, 2, 1, 1],
+        "augment_pad": 4,
+    },
+}
+IMAGE_ENCODERS = tuple(ENCODER_PRESETS)
+CONV_PRECISIONS = ("auto", "float32", "bfloat16")
 
 
 @OptimizerConfig.register_subclass("fused_adam")
@@ -67,11 +88,31 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # offset is picked uniformly per sample; docs/policy.md compares this with uniform t' in {t+2..T}.
     future_offsets: list[int] = field(default_factory=lambda: [2, 4, 8, 16])
 
-    # Networks (paper appendix): 3 hidden layers of 256, tanh; 4 conv layers shared by observation and goal.
+    # Networks (paper appendix): 3 hidden layers of 256, tanh; conv weights shared by observation and goal.
     hidden_dims: list[int] = field(default_factory=lambda: [256, 256, 256])
-    conv_channels: list[int] = field(default_factory=lambda: [16, 32, 64, 64])
-    conv_kernel_size: int = 2
-    conv_stride: int = 2
+    # Image encoder (docs/policy.md compares the two):
+    # "drq": one encoder shared by actor and critic and trained by the critic loss only (the actor sees
+    #   detached features), ReLU convs, a linear projection with LayerNorm + tanh, random-shift augmentation;
+    #   the design of DrQ-v2 and of LeRobot's SAC (gaussian_actor) encoder.
+    # "paper": the paper's, as in the authors' HER code: actor and critic (and each target) own a CNN of
+    #   2x2 stride-2 convs with tanh, flattened (or a spatial softmax), no projection, no augmentation.
+    image_encoder: str = "drq"
+    # Conv layers (one stride per layer), the projection width ("drq": DrQ-v2's feature_dim) and the
+    # random-shift augmentation (DrQ: images the networks see in training are padded by augment_pad pixels,
+    # edge replicated, and randomly cropped back, each frame independently; 0 = off; the indicator reward and
+    # relabeling always compare the raw frames). None = the image encoder's preset (ENCODER_PRESETS).
+    conv_channels: list[int] | None = None
+    conv_kernel_size: int | None = None
+    conv_strides: list[int] | None = None
+    feature_dim: int = 50
+    augment_pad: int | None = None
+    # Precision of the conv layers: "float32", "bfloat16" (autocast; the rest of the networks stays float32)
+    # or "auto" = bfloat16 where the device computes it natively (CUDA with bf16; CPUs with AVX512-BF16 or
+    # AMX), float32 elsewhere, where bf16 would be emulated and slower (docs/policy.md has the measurements).
+    conv_precision: str = "auto"
+    # "drq" only: the target critic keeps its own EMA copy of the encoder (as in SAC-AE / CURL) instead of
+    # using the online encoder's features of o_{t+1} and the goal (DrQ-v2).
+    target_encoder: bool = False
     # RopePush: spatial softmax with 32 keypoints before the fully connected layers.
     spatial_softmax: bool = False
     spatial_softmax_keypoints: int = 32
@@ -144,8 +185,22 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             )
         if not 0 <= self.tau <= 1:
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")
+        if self.image_encoder not in IMAGE_ENCODERS:
+            raise ValueError(f"image_encoder must be one of {IMAGE_ENCODERS}, got {self.image_encoder!r}")
+        for name, value in ENCODER_PRESETS[self.image_encoder].items():
+            if getattr(self, name) is None:
+                setattr(self, name, value)
         if len(self.conv_channels) == 0 or len(self.hidden_dims) == 0:
             raise ValueError("conv_channels and hidden_dims must not be empty")
+        if len(self.conv_strides) != len(self.conv_channels):
+            raise ValueError(
+                f"conv_strides has {len(self.conv_strides)} entries but conv_channels has "
+                f"{len(self.conv_channels)}: give one stride per conv layer"
+            )
+        if self.conv_precision not in CONV_PRECISIONS:
+            raise ValueError(f"conv_precision must be one of {CONV_PRECISIONS}, got {self.conv_precision!r}")
+        if self.augment_pad < 0:
+            raise ValueError(f"augment_pad must be >= 0 pixels, got {self.augment_pad}")
 
     # Paper quantities derived from the horizon.
     @property
@@ -211,6 +266,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             )
         keep = self.observation_keys + self.goal_keys
         self.input_features = {k: features[k] for k in keep}
+
+    @property
+    def shared_encoder(self) -> bool:
+        """One encoder for actor and critic, trained by the critic loss only: the "drq" design with images."""
+        return self.image_encoder == "drq" and bool(self.image_keys)
 
     @property
     def image_keys(self) -> list[str]:

@@ -28,7 +28,7 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, encode_frames
 
 ACTION = "action"
 NEXT = "next."
@@ -140,6 +140,66 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * mask).sum() / mask.sum().clamp_min(1)
 
 
+@dataclass
+class Features:
+    """``[enc(o), enc(o_g)]`` as each network sees it in one update."""
+
+    critic: Tensor  # (o_t, g) for Q(o_t, g, a_t), with gradients into the critic's encoder
+    actor: Tensor  # (o_t, g) for pi(o_t, g): the critic's, detached, when the encoder is shared
+    target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
+    target_actor: Tensor
+
+
+def encode_batch(
+    obs: dict[str, Tensor],
+    next_obs: dict[str, Tensor],
+    goal: dict[str, Tensor],
+    source: Tensor,
+    actor: nn.Module,
+    critic: Critic,
+    target_actor: nn.Module,
+    target_critic: nn.Module,
+    config: IndicatorDDPGConfig,
+) -> Features:
+    """Every network's features, each distinct frame encoded once per encoder.
+
+    A goal that *is* o_{t+1} (``source`` next, about half the batch with balancing) reuses o_{t+1}'s
+    encoding. With the shared ("drq") encoder one conv pass over o_t, o_{t+1} and the other goals serves all
+    four networks: the targets use the online encoder's features of (o_{t+1}, g) without gradients (DrQ-v2),
+    or their own EMA encoder (``target_encoder``). Under ``torch.compile`` (static shapes) and for state
+    inputs every goal is encoded, which gives the same values.
+    """
+    dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
+    if dedupe:
+        rest = (source != SOURCE_NEXT).nonzero().squeeze(1)
+        goal_rest = {k: v[rest] for k, v in goal.items()}
+
+    def encode_with_next(encoder: nn.Module, frames: list[dict[str, Tensor]]) -> list[Tensor]:
+        """Encodings of ``frames`` + [o_{t+1}, g], the goal's sharing o_{t+1}'s where they are one frame."""
+        if not dedupe:
+            return encode_frames(encoder, [*frames, next_obs, goal], augment=True)
+        *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], augment=True)
+        return [*h, h_next, h_next.index_put((rest,), h_rest)]
+
+    if config.shared_encoder:
+        h_obs, h_next, h_goal = encode_with_next(critic.encoder, [obs])
+        features = torch.cat([h_obs, h_goal], dim=1)
+        target = torch.cat([h_next, h_goal], dim=1).detach()
+        if config.target_encoder:
+            with torch.no_grad():
+                target = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
+        return Features(critic=features, actor=features.detach(), target_critic=target, target_actor=target)
+    with torch.no_grad():
+        target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
+        target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
+    return Features(
+        critic=critic.encode(obs, goal, augment=True),
+        actor=actor.encode(obs, goal, augment=True),
+        target_critic=target_c,
+        target_actor=target_a,
+    )
+
+
 def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
     """target <- tau * target + (1 - tau) * online (paper: target network smoothing 0.98).
 
@@ -194,10 +254,10 @@ def indicator_ddpg_loss(
         success = ground_truth_success(batch[GT_NEXT_ACHIEVED], gt_goal, config.oracle_epsilon)
         reward = torch.where(success, config.positive_reward, config.negative_reward)
 
-    features = critic.encode(obs, goal)
-    q = critic.head(features, action)
+    f = encode_batch(obs, next_obs, goal, relabel.source, actor, critic, target_actor, target_critic, config)
+    q = critic.head(f.critic, action)
     with torch.no_grad():
-        next_q = target_critic(next_obs, goal, target_actor(next_obs, goal))
+        next_q = target_critic.head(f.target_critic, target_actor.head(f.target_actor))
         # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
         target = (reward + config.gamma * next_q).clamp(config.q_min, config.q_max)
         keep = (
@@ -208,8 +268,8 @@ def indicator_ddpg_loss(
     keep_f = keep.to(q.dtype)
     critic_loss = masked_mean((q - target) ** 2, keep_f)
 
-    pi = actor(obs, goal)
-    q_pi = critic.head(features.detach(), pi, frozen=True)
+    pi = actor.head(f.actor)
+    q_pi = critic.head(f.critic.detach(), pi, frozen=True)
     actor_loss = masked_mean(-q_pi + config.action_l2 * (pi**2).mean(dim=1), keep_f)
 
     valid_f = valid.float()

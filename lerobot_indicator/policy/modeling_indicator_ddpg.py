@@ -10,7 +10,7 @@ import copy
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
-from torch import Tensor
+from torch import Tensor, nn
 
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core
@@ -32,9 +32,12 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         config.validate_features()
         self.config = config
         self.actor = Actor(config, dataset_stats)
-        self.critic = Critic(config, dataset_stats)
-        self.target_actor = copy.deepcopy(self.actor).requires_grad_(False)
-        self.target_critic = copy.deepcopy(self.critic).requires_grad_(False)
+        shared = self.actor.encoder if config.shared_encoder else None
+        self.critic = Critic(config, dataset_stats, encoder=shared)
+        # One deepcopy of both keeps a shared encoder shared between the targets too.
+        self.target_actor, self.target_critic = copy.deepcopy((self.actor, self.critic))
+        self.target_actor.requires_grad_(False)
+        self.target_critic.requires_grad_(False)
         self._loss = indicator_core.indicator_ddpg_loss
         if config.compile_model:
             # Static shapes: a second batch size (a last short batch, another policy in the same process)
@@ -47,15 +50,19 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
             net.encoder.set_stats(stats)
 
     def get_optim_params(self) -> list[dict]:
-        # Target networks are moved by update(), never by the optimizer.
-        return [{"params": [*self.actor.parameters(), *self.critic.parameters()]}]
+        # Target networks are moved by update(), never by the optimizer; a shared encoder is listed once.
+        return [{"params": list(nn.ModuleList([self.actor, self.critic]).parameters())}]
 
     def reset(self) -> None:
         pass
 
     def update(self) -> None:
-        indicator_core.soft_update(self.target_actor, self.actor, self.config.tau)
-        indicator_core.soft_update(self.target_critic, self.critic, self.config.tau)
+        # Both pairs in one call: a shared encoder is moved once.
+        indicator_core.soft_update(
+            nn.ModuleList([self.target_actor, self.target_critic]),
+            nn.ModuleList([self.actor, self.critic]),
+            self.config.tau,
+        )
 
     def forward(
         self, batch: dict[str, Tensor], generator: torch.Generator | None = None

@@ -6,6 +6,9 @@ compared observation keys; a goal dict uses the same keys (its values are goal o
 makes hindsight relabeling a plain swap of tensors.
 """
 
+import functools
+from pathlib import Path
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -96,10 +99,13 @@ def mlp(in_dim: int, hidden_dims: list[int], out_dim: int) -> nn.Sequential:
 
 
 class ObservationEncoder(nn.Module):
-    """Normalises each compared key with its dataset mean/std, stacks images as channels, flattens states.
+    """Normalises each compared key with its mean/std, encodes the images, flattens and appends the states.
 
     The same instance encodes observations and goals, so a goal is normalised with its *observation* key's
-    statistics: relabeled goals (o_{t+1}, o_{t'}) and recorded goals share one representation.
+    statistics: relabeled goals (o_{t+1}, o_{t'}) and recorded goals share one representation. Images (stacked
+    as channels) go through the conv layers, then a flatten (or the spatial softmax) and, for the "drq"
+    encoder, a linear projection with LayerNorm + tanh. Images are randomly shifted first
+    (``augment_pad``) when asked: by the learning core, never when acting.
     """
 
     def __init__(
@@ -109,6 +115,7 @@ class ObservationEncoder(nn.Module):
         self.image_keys = config.image_keys
         self.state_keys = config.state_keys
         self.input_clip = config.input_clip
+        self.augment_pad = config.augment_pad
         for i, key in enumerate(config.observation_keys):
             shape = tuple(config.input_features[key].shape)
             self.register_buffer(f"mean_{i}", torch.zeros(shape))
@@ -119,27 +126,46 @@ class ObservationEncoder(nn.Module):
         self.out_dim = sum(int(torch.tensor(config.input_features[k].shape).prod()) for k in self.state_keys)
         self.conv = None
         if self.image_keys:
+            drq = config.image_encoder == "drq"
             channels = sum(config.input_features[k].shape[0] for k in self.image_keys)
             height, width = config.input_features[self.image_keys[0]].shape[1:]
             layers: list[nn.Module] = []
             in_ch = channels
-            for ch in config.conv_channels:
-                layers += [nn.Conv2d(in_ch, ch, config.conv_kernel_size, config.conv_stride), Tanh()]
+            for ch, stride in zip(config.conv_channels, config.conv_strides, strict=True):
+                layers += [
+                    nn.Conv2d(in_ch, ch, config.conv_kernel_size, stride),
+                    nn.ReLU() if drq else Tanh(),
+                ]
                 in_ch = ch
             self.conv = nn.Sequential(*layers)
+            self.conv_precision = config.conv_precision
+            self.fold_normalization = drq
             with torch.no_grad():
                 fmap = self.conv(torch.zeros(1, channels, height, width))
-            self.keypoints = None
+            if fmap.shape[-1] < 1 or fmap.shape[-2] < 1:
+                raise ValueError(f"images of {height}x{width} px are too small for the conv layers")
+            pool: nn.Module = nn.Flatten()
+            pooled_dim = int(fmap[0].numel())
             if config.spatial_softmax:
                 # Lazy import: the diffusion module pulls in optional dependencies.
                 from lerobot.policies.diffusion.modeling_diffusion import SpatialSoftmax
 
-                self.keypoints = SpatialSoftmax(
-                    tuple(fmap.shape[1:]), num_kp=config.spatial_softmax_keypoints
+                pool = nn.Sequential(
+                    SpatialSoftmax(tuple(fmap.shape[1:]), num_kp=config.spatial_softmax_keypoints),
+                    nn.Flatten(),
                 )
-                self.out_dim += 2 * config.spatial_softmax_keypoints
+                pooled_dim = 2 * config.spatial_softmax_keypoints
+            if drq:
+                self.trunk = nn.Sequential(
+                    pool,
+                    nn.Linear(pooled_dim, config.feature_dim),
+                    nn.LayerNorm(config.feature_dim),
+                    nn.Tanh(),
+                )
+                self.out_dim += config.feature_dim
             else:
-                self.out_dim += int(fmap[0].numel())
+                self.trunk = pool
+                self.out_dim += pooled_dim
 
     @torch.no_grad()
     def set_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
@@ -170,18 +196,136 @@ class ObservationEncoder(nn.Module):
     def normalize(self, key: str, x: Tensor) -> Tensor:
         return self.standardize(key, x).clamp(-self.input_clip, self.input_clip)
 
-    def forward(self, obs: dict[str, Tensor]) -> Tensor:
-        parts = [self.normalize(k, obs[k]).flatten(1) for k in self.state_keys]
+    def forward(self, obs: dict[str, Tensor], augment: bool = False) -> Tensor:
+        """Features of a batch of frames; ``augment``: randomly shift the images (the learning core's
+        updates; actions are always chosen from the frames as they are)."""
+        parts = [self.normalize(k, as_float(obs[k])).flatten(1) for k in self.state_keys]
         if self.conv is not None:
-            images = torch.cat([self.normalize(k, obs[k]) for k in self.image_keys], dim=1)
-            # channels_last halves the conv stack's CPU time (measured: 1.27 s -> 0.63 s fwd+bwd, batch 256).
-            fmap = self.conv(images.contiguous(memory_format=torch.channels_last))
-            parts.append(self.keypoints(fmap).flatten(1) if self.keypoints is not None else fmap.flatten(1))
+            parts.append(self.trunk(self.conv_features(obs, augment)))
         return torch.cat(parts, dim=1)
 
+    def conv_features(self, obs: dict[str, Tensor], augment: bool = False) -> Tensor:
+        """Conv feature maps (float32) of the image keys, stacked as channels.
 
-class Actor(nn.Module):
-    """pi(o, o_g) = tanh(MLP([enc(o), enc(o_g)])), in the env's [-1, 1] action space."""
+        Frames may arrive as stored (uint8 RGB, uint16 depth: the replay buffer's packing) or as float32. The
+        "paper" encoder normalises and clips them as the state keys; "drq" folds the per-channel normalisation
+        (and uint8's 1/255) into the first conv's weights, so no float copy of the frames is made before it:
+        the frames are shifted in their stored dtype and cast once to the conv precision.
+        """
+        frames = [obs[k] for k in self.image_keys]
+        if augment and self.augment_pad > 0:
+            frames = random_shift(frames, self.augment_pad)
+        device = frames[0].device.type
+        bf16 = use_bf16(self.conv_precision, device)
+        if self.fold_normalization:
+            dtype = torch.bfloat16 if bf16 else torch.float32
+            images = torch.cat([f.to(dtype) for f in frames], dim=1)
+        else:
+            images = torch.cat(
+                [self.normalize(k, as_float(f)) for k, f in zip(self.image_keys, frames, strict=True)], 1
+            )
+        # channels_last: the layout oneDNN's CPU convolutions are fastest in (about 2x here).
+        images = images.contiguous(memory_format=torch.channels_last)
+        with torch.autocast(device, torch.bfloat16, enabled=bf16):
+            first, rest = self.conv[0], self.conv[1:]
+            if self.fold_normalization:
+                weight, bias = self._folded_first_conv([f.dtype for f in frames])
+                x = F.conv2d(images, weight, bias, first.stride)
+            else:
+                x = first(images)
+            fmap = rest(x)
+        return fmap.float()
+
+    def _folded_first_conv(self, dtypes: list[torch.dtype]) -> tuple[Tensor, Tensor]:
+        """First conv's weight and bias acting on raw frames: conv(W, (x * u - m) / s) = conv(W u / s, x) -
+        sum(W m / s), with per-channel mean m and std s, and u = 1/255 for uint8 frames (else 1)."""
+        scales, offsets = [], []
+        for key, dtype in zip(self.image_keys, dtypes, strict=True):
+            i = self._index[key]
+            mean = getattr(self, f"mean_{i}").mean(dim=(1, 2))
+            std = getattr(self, f"std_{i}").mean(dim=(1, 2))
+            unit = 1 / 255 if dtype == torch.uint8 else 1.0
+            scales.append(unit / std)
+            offsets.append(mean / std)
+        scale, offset = torch.cat(scales).view(1, -1, 1, 1), torch.cat(offsets).view(1, -1, 1, 1)
+        first: nn.Conv2d = self.conv[0]
+        return first.weight * scale, first.bias - (first.weight * offset).sum(dim=(1, 2, 3))
+
+
+def as_float(x: Tensor) -> Tensor:
+    """A stored frame's float32 value: uint8 k is k/255 (LeRobot's image convention and the replay buffer's
+    packing), other integers are their value (uint16 depth)."""
+    if x.dtype == torch.uint8:
+        return x.float() / 255
+    return x if x.dtype == torch.float32 else x.float()
+
+
+def random_shift(frames: list[Tensor], pad: int) -> list[Tensor]:
+    """DrQ's random shift (pad ``pad`` pixels by edge replication, random crop back), one shift per frame
+    shared by all its keys, so RGB and depth stay aligned.
+
+    LeRobot's ``lerobot.rl.buffer.random_shift`` draws a shift per call (per key) and pads a copy first; here
+    the replicating pad is folded into clamped indices of one ``index_select`` per key (no padded copy) and
+    frames keep their stored dtype (uint8 moves a quarter of float32's bytes): 2x faster on CPU
+    (docs/policy.md). Draws from torch's global RNG, which both trainers seed. Returns channels-last tensors.
+    """
+    b, _, h, w = frames[0].shape
+    device = frames[0].device
+    shift = torch.randint(0, 2 * pad + 1, (2, b, 1), device=device) - pad
+    rows = (torch.arange(h, device=device) + shift[0]).clamp_(0, h - 1)  # (b, h)
+    cols = (torch.arange(w, device=device) + shift[1]).clamp_(0, w - 1)  # (b, w)
+    pixel = torch.arange(b, device=device)[:, None, None] * (h * w) + rows[:, :, None] * w + cols[:, None, :]
+    out = []
+    for x in frames:
+        c = x.shape[1]
+        shifted = x.permute(0, 2, 3, 1).reshape(-1, c).index_select(0, pixel.view(-1))
+        out.append(shifted.view(b, h, w, c).permute(0, 3, 1, 2))
+    return out
+
+
+@functools.cache
+def native_bf16(device_type: str) -> bool:
+    """Whether ``device_type`` computes bfloat16 natively: CUDA with bf16, or a CPU with AVX512-BF16 / AMX."""
+    if device_type == "cuda":
+        return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
+    if device_type == "cpu":
+        cpuinfo = Path("/proc/cpuinfo")
+        flags = cpuinfo.read_text() if cpuinfo.exists() else ""
+        return any(f in flags for f in ("avx512_bf16", "amx_bf16"))
+    return False
+
+
+def use_bf16(precision: str, device_type: str) -> bool:
+    return precision == "bfloat16" or (precision == "auto" and native_bf16(device_type))
+
+
+def encode_frames(
+    encoder: ObservationEncoder, parts: list[dict[str, Tensor]], augment: bool = False
+) -> list[Tensor]:
+    """Encode several batches of frames in one call (one conv pass over all of them), split back per batch."""
+    if len(parts) == 1:
+        return [encoder(parts[0], augment)]
+    merged = {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
+    sizes = [next(iter(p.values())).shape[0] for p in parts]
+    return list(encoder(merged, augment).split(sizes))
+
+
+class GoalConditioned(nn.Module):
+    """An encoder shared by observation and goal, then an MLP on ``[enc(o), enc(o_g)]``."""
+
+    encoder: ObservationEncoder
+    net: nn.Sequential
+
+    def encode(self, obs: dict[str, Tensor], goal: dict[str, Tensor], augment: bool = False) -> Tensor:
+        """``[enc(o), enc(o_g)]``, both encoded in one call."""
+        return torch.cat(encode_frames(self.encoder, [obs, goal], augment), dim=1)
+
+
+class Actor(GoalConditioned):
+    """pi(o, o_g) = tanh(MLP([enc(o), enc(o_g)])), in the env's [-1, 1] action space.
+
+    With the shared ("drq") design the critic uses this encoder too and the actor's loss sees its features
+    detached (``indicator_core.encode_batch``), so only the critic loss trains it."""
 
     def __init__(
         self, config: IndicatorDDPGConfig, dataset_stats: dict[str, dict[str, Tensor]] | None = None
@@ -190,30 +334,34 @@ class Actor(nn.Module):
         self.encoder = ObservationEncoder(config, dataset_stats)
         self.net = mlp(2 * self.encoder.out_dim, config.hidden_dims, config.action_dim)
 
+    def head(self, features: Tensor) -> Tensor:
+        return tanh(self.net(features))
+
     def forward(self, obs: dict[str, Tensor], goal: dict[str, Tensor]) -> Tensor:
-        return tanh(self.net(torch.cat([self.encoder(obs), self.encoder(goal)], dim=1)))
+        return self.head(self.encode(obs, goal))
 
 
-class Critic(nn.Module):
+class Critic(GoalConditioned):
     """Q(o, o_g, a) = MLP([enc(o), enc(o_g), a]); output bias starts at ``config.initial_q`` (Q initialised low).
 
     ``encode`` and ``head`` are split so a DDPG step encodes (o, o_g) once for Q(o, o_g, a) and
-    Q(o, o_g, pi(o, o_g)): for images the conv encoder is most of an update's cost.
+    Q(o, o_g, pi(o, o_g)): for images the conv encoder is most of an update's cost. ``encoder``: the actor's,
+    for the shared ("drq") design.
     """
 
     def __init__(
-        self, config: IndicatorDDPGConfig, dataset_stats: dict[str, dict[str, Tensor]] | None = None
+        self,
+        config: IndicatorDDPGConfig,
+        dataset_stats: dict[str, dict[str, Tensor]] | None = None,
+        encoder: ObservationEncoder | None = None,
     ):
         super().__init__()
-        self.encoder = ObservationEncoder(config, dataset_stats)
+        self.encoder = encoder if encoder is not None else ObservationEncoder(config, dataset_stats)
         self.net = mlp(2 * self.encoder.out_dim + config.action_dim, config.hidden_dims, 1)
         # Low initial Q keeps every Q below q0, so reward filtering cannot fire before the critic has learnt
         # (paper section 5.3). The minimum achievable return is the natural "low" value.
         last: nn.Linear = self.net[-1]
         nn.init.constant_(last.bias, config.initial_q)
-
-    def encode(self, obs: dict[str, Tensor], goal: dict[str, Tensor]) -> Tensor:
-        return torch.cat([self.encoder(obs), self.encoder(goal)], dim=1)
 
     def head(self, features: Tensor, action: Tensor, frozen: bool = False) -> Tensor:
         """Q from ``encode``'s features. ``frozen``: the MLP's weights are detached, so gradients reach

@@ -29,7 +29,7 @@ from lerobot.policies import make_policy, make_pre_post_processors
 from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot.utils.random_utils import set_seed
 from lerobot.utils.utils import init_logging
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_model, save_model
 from tqdm import tqdm
 
 from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
@@ -77,7 +77,10 @@ def to_transition_batch(
     probability, so its future goal is uniform over {t+1..T}."""
 
     def t(x: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(np.ascontiguousarray(x)).to(device)
+        x = torch.from_numpy(np.ascontiguousarray(x)).to(device)
+        # uint8 frames stay uint8 (the networks convert them); torch has few uint16 kernels, so packed depth
+        # becomes its float32 value here.
+        return x.float() if x.dtype == torch.uint16 else x
 
     batch = {
         core.ACTION: t(sample["action"]),
@@ -219,7 +222,7 @@ class OnlineTrainer:
         tmp, final, old = (self.out / f"{RESUME_DIR}{s}" for s in (".tmp", "", ".old"))
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        save_file(self.policy.state_dict(), tmp / "model.safetensors")
+        save_model(self.policy, str(tmp / "model.safetensors"))  # handles the shared encoder
         save_optimizer_state(self.optimizer, tmp)
         (tmp / "progress.json").write_text(json.dumps(self.progress.__dict__))
         if final.exists():
@@ -233,7 +236,7 @@ class OnlineTrainer:
             state = self.out / f"{RESUME_DIR}.old"  # crashed between the two renames
         if not state.exists():
             raise FileNotFoundError(f"--resume=true but {self.out} has no resume state ({RESUME_DIR}/)")
-        self.policy.load_state_dict(load_file(state / "model.safetensors"))
+        load_model(self.policy, str(state / "model.safetensors"))
         self.optimizer = load_optimizer_state(self.optimizer, state)
         self.progress = Progress(**json.loads((state / "progress.json").read_text()))
         files = self.progress.replay_files
@@ -315,7 +318,7 @@ class OnlineTrainer:
         sums: dict[str, float] = {}
         for _ in range(self.cfg.online.updates_per_cycle):
             batch = to_transition_batch(
-                self.buffer.sample(self.batch_size, rng), self.keys, self.horizon, self.device
+                self.buffer.sample(self.batch_size, rng, packed=True), self.keys, self.horizon, self.device
             )
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
@@ -359,6 +362,7 @@ class OnlineTrainer:
         while self.progress.cycle < self.n_cycles:
             t0, cycle = time.perf_counter(), self.progress.cycle
             generator = torch.Generator().manual_seed(cycle_seed(cfg.seed, cycle))
+            torch.manual_seed(cycle_seed(cfg.seed, cycle))  # image augmentation draws from the global RNG
             rng = np.random.default_rng([cfg.seed, cycle])
             warmup = self.progress.episodes < o.warmup_episodes
             rollouts = self.collect(cycle, generator, warmup)

@@ -165,14 +165,16 @@ class EpisodeReplayBuffer:
         self.num_episodes = min(self.num_episodes + 1, self.capacity)
         self.total_episodes_added += 1
 
-    def sample(self, batch_size: int, rng: np.random.Generator) -> dict:
+    def sample(self, batch_size: int, rng: np.random.Generator, packed: bool = False) -> dict:
         """Sample transitions uniformly, each with one future observation of its own episode.
 
         The future index is uniform in ``{t+2, ..., T}`` (paper Algorithm 1). For ``t = T - 1`` that
         set is empty: ``has_future`` is False and ``future_obs`` holds ``o_T`` as a placeholder.
         Returns float32 dicts ``obs`` (goal keys included: the recorded goal), ``next_obs`` and
         ``future_obs``, plus ``action``, ``has_future`` and, when stored, ground truth
-        ``gt_next_achieved``, ``gt_future_achieved`` and ``gt_desired``.
+        ``gt_next_achieved``, ``gt_future_achieved`` and ``gt_desired``. ``packed``: observations stay in
+        their stored dtype (uint8 = k/255, uint16 = its value; 4x / 2x smaller than float32), so they move to
+        the device as they are and the networks convert them there (``networks_indicator_ddpg.as_float``).
         """
         if self.num_episodes == 0:
             raise RuntimeError("cannot sample from an empty replay buffer")
@@ -182,12 +184,14 @@ class EpisodeReplayBuffer:
         has_future = t + 2 <= T
         span = np.maximum(T - t - 1, 1)  # |{t+2..T}|, 1 where empty (masked)
         future = np.where(has_future, t + 2 + (rng.random(batch_size) * span).astype(np.int64), T)
-        obs = {k: v[ep, t] for k, v in self.obs.items()}
-        obs.update({k: v[ep] for k, v in self.goals.items()})
+        arrays = {**self.obs, **self.goals}
+        get = (lambda k, *i: arrays[k].data[i]) if packed else (lambda k, *i: arrays[k][i])
+        obs = {k: get(k, ep, t) for k in self.obs}
+        obs.update({k: get(k, ep) for k in self.goals})
         batch = {
             "obs": obs,
-            "next_obs": {k: v[ep, t + 1] for k, v in self.obs.items()},
-            "future_obs": {k: v[ep, future] for k, v in self.obs.items()},
+            "next_obs": {k: get(k, ep, t + 1) for k in self.obs},
+            "future_obs": {k: get(k, ep, future) for k in self.obs},
             "action": self.actions[ep, t],
             "has_future": has_future,
             "episode": ep,

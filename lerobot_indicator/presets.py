@@ -1,0 +1,118 @@
+"""The paper's method arms and the task budgets of its comparison, as ``lerobot-indicator-train`` flags.
+
+Used by ``scripts/experiments.py`` (the comparison), ``scripts/bench_vs_sb3.py`` and the docs, so an arm is
+defined once. A method is a list of ``--policy.*`` flags; a task preset the env flags and the budget.
+"""
+
+from dataclasses import dataclass
+
+# Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
+# future step with probability 0.9 and keep the original goal otherwise (HER-style). Balancing names its t = T-1
+# fallback (o_{t+1}, the default) so that a run's command says what it did.
+METHODS: dict[str, list[str]] = {
+    "oracle": ["--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
+    "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
+    "indicator_balance": [
+        "--policy.reward=indicator",
+        "--policy.balance=true",
+        "--policy.balance_fallback=next",
+        "--policy.filter=false",
+    ],
+    "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
+    "indicator_balance_filter": [
+        "--policy.reward=indicator",
+        "--policy.balance=true",
+        "--policy.balance_fallback=next",
+        "--policy.filter=true",
+    ],
+}
+PAPER_METHODS = list(METHODS)
+# Variants of the paper's methods, each one flag away from it:
+# - the other reading of balancing at t = T-1 (no t' >= t+2): the recorded goal instead of o_{t+1};
+# - image inputs: the paper's encoder instead of the default ("drq", docs/policy.md), and float32 convs.
+VARIANTS = {
+    f"{m}_recorded_fallback": [
+        a.replace("balance_fallback=next", "balance_fallback=recorded") for a in METHODS[m]
+    ]
+    for m in ("indicator_balance", "indicator_balance_filter")
+}
+VARIANTS["indicator_balance_filter_paper_encoder"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.image_encoder=paper",
+]
+VARIANTS["indicator_balance_filter_fp32"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.conv_precision=float32",
+]
+METHODS.update(VARIANTS)
+LABELS = {
+    "oracle": "Oracle",
+    "indicator": "Indicator",
+    "indicator_balance": "Indicator+Balance",
+    "indicator_filter": "Indicator+Filter",
+    "indicator_balance_filter": "Indicator+Balance+Filter",
+    "indicator_balance_recorded_fallback": "Indicator+Balance (t=T-1: recorded goal)",
+    "indicator_balance_filter_recorded_fallback": "Indicator+Balance+Filter (t=T-1: recorded goal)",
+    "indicator_balance_filter_paper_encoder": "Indicator+Balance+Filter, paper encoder",
+    "indicator_balance_filter_fp32": "Indicator+Balance+Filter, float32 convs",
+}
+# Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
+STYLES = {
+    "oracle": ("tab:blue", "-"),
+    "indicator": ("tab:orange", "-"),
+    "indicator_balance": ("tab:green", "--"),
+    "indicator_filter": ("tab:red", ":"),
+    "indicator_balance_filter": ("tab:purple", "-."),
+    "indicator_balance_recorded_fallback": ("tab:olive", "--"),
+    "indicator_balance_filter_recorded_fallback": ("tab:brown", "-."),
+    "indicator_balance_filter_paper_encoder": ("tab:gray", "--"),
+    "indicator_balance_filter_fp32": ("tab:pink", ":"),
+}
+RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
+
+
+@dataclass
+class TaskPreset:
+    env_args: list[str]
+    steps: int
+    updates_per_cycle: int
+    episodes_per_cycle: int
+    env_eval_freq: int
+    eval_episodes: int = 20
+
+
+TASKS: dict[str, TaskPreset] = {
+    "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 1600, 40, 4, 200),
+    # From pixels only, 64x64 RGB-D: 8000 updates = 20,000 env steps.
+    "reach_rgbd": TaskPreset(
+        [
+            "--env.type=sawyer_reach",
+            "--env.obs_type=rgbd",
+            "--env.camera.height=64",
+            "--env.camera.width=64",
+            RGBD_KEYS,
+        ],
+        8000,
+        40,
+        4,
+        400,
+        20,
+    ),
+    "rope_state": TaskPreset(
+        ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
+        6000,
+        40,
+        8,
+        400,
+        20,
+    ),
+    # Paper appendix B: RopePush's image encoder ends in a spatial softmax (32 keypoints).
+    "rope_rgbd": TaskPreset(
+        ["--env.type=rope_push", "--env.obs_type=rgbd", RGBD_KEYS, "--policy.spatial_softmax=true"],
+        2000,
+        40,
+        8,
+        400,
+        10,
+    ),
+}

@@ -1,0 +1,161 @@
+"""The image path: the shared ("drq") encoder, random shifts, folded normalisation, one encoding per frame."""
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from lerobot_indicator.bench.updates import make_batch, make_policy, rgbd_features
+from lerobot_indicator.policy import indicator_core as core
+from lerobot_indicator.policy.networks_indicator_ddpg import as_float, native_bf16, random_shift, use_bf16
+
+SMALL = {"hidden_dims": [16, 16, 16], "conv_precision": "float32"}
+RGB, DEPTH = "observation.images.front", "observation.images.front_depth"
+
+
+def policy_and_batch(size: int = 24, batch_size: int = 6, **config):
+    torch.manual_seed(0)
+    features = rgbd_features(size)
+    policy = make_policy(features, **{**SMALL, **config})
+    stats = {
+        RGB: {
+            "mean": torch.tensor([0.4, 0.5, 0.6]).view(3, 1, 1),
+            "std": torch.tensor([0.2, 0.3, 0.1]).view(3, 1, 1),
+        },
+        DEPTH: {"mean": torch.full((1, 1, 1), 900.0), "std": torch.full((1, 1, 1), 400.0)},
+    }
+    policy.set_observation_stats(stats)
+    return policy, make_batch(features, batch_size)
+
+
+def test_presets_fill_the_conv_fields_and_explicit_values_win():
+    paper, _ = policy_and_batch(image_encoder="paper")
+    assert paper.config.conv_channels == [16, 32, 64, 64] and paper.config.augment_pad == 0
+    assert not paper.config.shared_encoder and paper.actor.encoder is not paper.critic.encoder
+    drq, _ = policy_and_batch(conv_channels=[8, 8, 8, 8])
+    assert drq.config.conv_channels == [8, 8, 8, 8] and drq.config.augment_pad == 4
+    assert drq.config.shared_encoder and drq.actor.encoder is drq.critic.encoder
+    assert drq.target_actor.encoder is drq.target_critic.encoder is not drq.critic.encoder
+    with pytest.raises(ValueError, match="one stride per conv layer"):
+        policy_and_batch(conv_channels=[8, 8])
+
+
+def test_random_shift_is_a_clamped_translation_shared_by_all_keys():
+    b, h, w, pad = 64, 9, 11, 2
+    ys, xs = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
+    rgb = (ys * w + xs).to(torch.uint8).expand(b, 3, h, w).contiguous()
+    depth = (1000 + ys * w + xs).float().expand(b, 1, h, w).contiguous()
+    torch.manual_seed(0)
+    out_rgb, out_depth = random_shift([rgb, depth], pad)
+    assert out_rgb.dtype == torch.uint8 and out_rgb.is_contiguous(memory_format=torch.channels_last)
+    seen = set()
+    for i in range(b):
+        # The output's top-left pixel tells the shift; every pixel must be the input at the clamped offset.
+        dy = int(out_depth[i, 0, h // 2, w // 2] - 1000) // w - h // 2
+        dx = int(out_depth[i, 0, h // 2, w // 2] - 1000) % w - w // 2
+        assert abs(dy) <= pad and abs(dx) <= pad
+        rows = (torch.arange(h) + dy).clamp(0, h - 1)
+        cols = (torch.arange(w) + dx).clamp(0, w - 1)
+        expected = (rows[:, None] * w + cols[None, :]).float()
+        torch.testing.assert_close(out_depth[i, 0], expected + 1000)
+        assert torch.equal(out_rgb[i, 1], expected.to(torch.uint8))  # RGB moved with the depth
+        seen.add((dy, dx))
+    assert len(seen) > 10  # shifts differ between frames
+
+
+def test_drq_folds_normalisation_into_the_first_conv_for_uint8_and_float_frames():
+    policy, batch = policy_and_batch()
+    enc = policy.critic.encoder
+    obs = {RGB: batch[RGB], DEPTH: batch[DEPTH]}
+    folded = enc.conv_features(obs)
+    as_floats = enc.conv_features({k: as_float(v) for k, v in obs.items()})
+    explicit = enc.conv(torch.cat([enc.standardize(k, as_float(v)) for k, v in obs.items()], dim=1))
+    torch.testing.assert_close(folded, explicit, atol=1e-4, rtol=1e-4)
+    torch.testing.assert_close(as_floats, explicit, atol=1e-4, rtol=1e-4)
+
+
+def test_shared_encoder_is_trained_by_the_critic_loss_only_and_listed_once():
+    policy, batch = policy_and_batch()
+    params = policy.get_optim_params()[0]["params"]
+    assert len(params) == len({id(p) for p in params})
+    encoder_ids = {id(p) for p in policy.critic.encoder.parameters()}
+    assert encoder_ids <= {id(p) for p in params}
+    original, parts = core.masked_mean, []
+
+    def spy(x, mask):
+        parts.append(original(x, mask))
+        return parts[-1]
+
+    core.masked_mean = spy
+    try:
+        policy.forward(batch, generator=torch.Generator().manual_seed(1))
+    finally:
+        core.masked_mean = original
+    critic_loss, actor_loss = parts[0], parts[1]
+    conv_weight = policy.critic.encoder.conv[0].weight
+    (actor_grad,) = torch.autograd.grad(actor_loss, [conv_weight], retain_graph=True, allow_unused=True)
+    assert actor_grad is None
+    actor_head = policy.actor.net[0].weight
+    assert torch.autograd.grad(actor_loss, [actor_head], retain_graph=True)[0].abs().sum() > 0
+    assert torch.autograd.grad(critic_loss, [conv_weight])[0].abs().sum() > 0
+
+
+@pytest.mark.parametrize("image_encoder", ["drq", "paper"])
+def test_reusing_o_next_encoding_for_goals_gives_the_same_loss(image_encoder, monkeypatch):
+    policy, batch = policy_and_batch(image_encoder=image_encoder, augment_pad=0, batch_size=32)
+    # Make some recorded goals equal to o_{t+1} too, so reuse and re-encoding cover the same frames.
+    for key in (RGB, DEPTH):
+        batch[core.goal_key(key)][:8] = batch[core.NEXT + key][:8]
+    reused, stats = policy.forward(batch, generator=torch.Generator().manual_seed(3))
+    assert 0.3 < stats["frac_goal_next"] < 0.8
+    monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)  # the path that encodes every goal
+    every_goal, stats_all = policy.forward(batch, generator=torch.Generator().manual_seed(3))
+    torch.testing.assert_close(reused, every_goal, rtol=1e-5, atol=1e-5)
+    assert stats == pytest.approx(stats_all, rel=1e-5, abs=1e-6)
+
+
+def test_augmentation_changes_what_the_networks_see_never_the_reward():
+    policy, batch = policy_and_batch(batch_size=64)
+    torch.manual_seed(7)
+    loss_a, stats_a = policy.forward(batch, generator=torch.Generator().manual_seed(2))
+    torch.manual_seed(8)
+    loss_b, stats_b = policy.forward(batch, generator=torch.Generator().manual_seed(2))
+    assert loss_a != loss_b  # other shifts, other features
+    for key in ("frac_positive", "frac_goal_next", "frac_goal_future", "frac_goal_recorded"):
+        assert stats_a[key] == stats_b[key]
+    assert stats_a["frac_positive"] == stats_a["frac_goal_next"]  # random frames: only o_{t+1} equals itself
+    obs = {RGB: batch[RGB], DEPTH: batch[DEPTH]}
+    goal = {RGB: batch[core.goal_key(RGB)], DEPTH: batch[core.goal_key(DEPTH)]}
+    assert torch.equal(
+        policy.select_action({**obs, **{core.goal_key(k): v for k, v in goal.items()}}),
+        policy.actor(obs, goal),
+    )
+
+
+@pytest.mark.parametrize("target_encoder", [False, True])
+def test_target_critic_uses_its_own_encoder_only_when_asked(target_encoder):
+    policy, batch = policy_and_batch(target_encoder=target_encoder, augment_pad=0)
+    before, _ = policy.forward(batch, generator=torch.Generator().manual_seed(4))
+    with torch.no_grad():
+        policy.target_critic.encoder.conv[0].weight.mul_(3.0)
+    after, _ = policy.forward(batch, generator=torch.Generator().manual_seed(4))
+    assert (before != after) == target_encoder
+
+
+def test_target_update_moves_a_shared_encoder_once():
+    policy, _ = policy_and_batch()
+    online, target = policy.critic.encoder.conv[0].weight, policy.target_critic.encoder.conv[0].weight
+    with torch.no_grad():
+        online.add_(1.0)
+    old_target = target.clone()
+    policy.update()
+    tau = policy.config.tau
+    torch.testing.assert_close(target, tau * old_target + (1 - tau) * online)
+
+
+def test_bf16_only_where_asked_or_native():
+    assert not use_bf16("float32", "cpu")
+    assert use_bf16("bfloat16", "cpu")
+    assert use_bf16("auto", "cpu") == native_bf16("cpu")
+    flags = Path("/proc/cpuinfo").read_text()
+    assert native_bf16("cpu") == ("avx512_bf16" in flags or "amx_bf16" in flags)

@@ -9,7 +9,7 @@ ROBOSUITE := robosuite==1.5.2
 PYTEST_ARGS ?=
 export MUJOCO_GL ?= egl
 
-.PHONY: install test lint format demo clean
+.PHONY: install test lint format demo demo-rgbd mutation clean
 
 install: $(STAMP)
 
@@ -36,6 +36,10 @@ format: install
 
 demo: install
 	$(PY) scripts/demo.py
+
+# From pixels only (64x64 RGB-D); about half an hour on 2 CPU cores (docs/results/demo_rgbd.json).
+demo-rgbd: install
+	$(PY) scripts/demo.py --preset=rgbd
 
 clean:
 	rm -rf $(VENV) outputs .pytest_cache .ruff_cache

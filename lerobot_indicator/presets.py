@@ -116,3 +116,43 @@ TASKS: dict[str, TaskPreset] = {
         10,
     ),
 }
+
+
+@dataclass
+class DemoPreset:
+    """``make demo`` / ``make demo-rgbd``: a budget that trains a working policy on a 2-core CPU."""
+
+    env_args: list[str]
+    train_args: list[str]
+    description: str
+
+
+DEMOS: dict[str, DemoPreset] = {
+    "state": DemoPreset(
+        ["--env.type=sawyer_reach", "--env.obs_type=state"],
+        [
+            "--steps=2400",
+            "--online.episodes_per_cycle=4",
+            "--online.updates_per_cycle=40",
+            "--online.eval_episodes=20",
+            "--env_eval_freq=400",
+            "--save_freq=2400",
+            "--seed=1",
+        ],
+        "indicator_ddpg on state-based Sawyer reach",
+    ),
+    # From pixels only: the policy compares and sees the 64x64 RGB-D camera (its default keys), never the state.
+    "rgbd": DemoPreset(
+        TASKS["reach_rgbd"].env_args[:-1],
+        [
+            "--steps=6000",
+            "--online.episodes_per_cycle=4",
+            "--online.updates_per_cycle=40",
+            "--online.eval_episodes=20",
+            "--env_eval_freq=1000",
+            "--save_freq=6000",
+            "--seed=1",
+        ],
+        "indicator_ddpg on Sawyer reach from 64x64 RGB-D images",
+    ),
+}

@@ -1,4 +1,5 @@
-"""`make demo`: train indicator_ddpg online on state-based Sawyer reach, then evaluate it with lerobot-eval.
+"""`make demo` / `make demo-rgbd`: train indicator_ddpg online on Sawyer reach (state, or RGB-D images only),
+then evaluate it with lerobot-eval.
 
 Everything runs through the installed console scripts, so the printed commands are exactly what a user
 would type. Prints the success rate and where the checkpoint, eval videos and learning curve are.
@@ -16,23 +17,15 @@ import sys
 import time
 from pathlib import Path
 
+from lerobot_indicator.presets import DEMOS
+
 BIN = Path(sys.executable).parent
-# Budget chosen to finish well inside 10 minutes of CPU on a 2-core machine (see docs/results/demo.json).
-TRAIN_ARGS = [
-    "--env.type=sawyer_reach",
-    "--env.obs_type=state",
+
+COMMON = [
     "--policy.type=indicator_ddpg",
     "--policy.device=cpu",
     "--policy.push_to_hub=false",
-    "--steps=2400",
     "--online.n_envs=2",
-    "--online.episodes_per_cycle=4",
-    "--online.updates_per_cycle=40",
-    "--online.eval_episodes=20",
-    "--online.torch_threads=1",
-    "--env_eval_freq=400",
-    "--save_freq=2400",
-    "--seed=1",
 ]
 
 
@@ -44,15 +37,26 @@ def run(cmd: list[str]) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     stamp = dt.datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
-    parser.add_argument("--output_dir", type=Path, default=Path("outputs/demo") / stamp)
+    parser.add_argument("--preset", choices=sorted(DEMOS), default="state")
+    parser.add_argument("--output_dir", type=Path, default=None, help="default: outputs/demo[_rgbd]/<time>")
     parser.add_argument("--eval_episodes", type=int, default=50)
     parser.add_argument("--min_success", type=float, default=80.0, help="exit non-zero below this pc_success")
     args = parser.parse_args()
-    out: Path = args.output_dir
+    demo = DEMOS[args.preset]
+    suffix = "" if args.preset == "state" else f"_{args.preset}"
+    out: Path = args.output_dir or Path(f"outputs/demo{suffix}") / stamp
     train_dir, eval_dir = out / "train", out / "eval"
 
     t0 = time.perf_counter()
-    run([BIN / "lerobot-indicator-train", *TRAIN_ARGS, f"--output_dir={train_dir}"])
+    run(
+        [
+            BIN / "lerobot-indicator-train",
+            *demo.env_args,
+            *COMMON,
+            *demo.train_args,
+            f"--output_dir={train_dir}",
+        ]
+    )
     train_s = time.perf_counter() - t0
     checkpoint = (train_dir / "checkpoints" / "last" / "pretrained_model").resolve()
 
@@ -61,8 +65,7 @@ def main() -> int:
         [
             BIN / "lerobot-eval",
             f"--policy.path={checkpoint}",
-            "--env.type=sawyer_reach",
-            "--env.obs_type=state",
+            *demo.env_args,
             # lerobot-eval's avg_sum_reward becomes minus the mean final distance to the goal.
             "--env.eval_reward=final_distance",
             f"--eval.n_episodes={args.eval_episodes}",
@@ -85,7 +88,7 @@ def main() -> int:
         "learning_curve": str((train_dir / "learning_curve.png").resolve()),
         "metrics": str((train_dir / "metrics.jsonl").resolve()),
     }
-    print("\n==== demo: indicator_ddpg on state-based Sawyer reach ====")
+    print(f"\n==== demo: {demo.description} ====")
     print(f"success rate (lerobot-eval, {summary['n_episodes']} episodes): {summary['pc_success']:.1f}%")
     print(f"mean final distance to the goal (lerobot-eval): {summary['mean_final_distance_m']:.3f} m")
     metrics = [json.loads(line) for line in (train_dir / "metrics.jsonl").read_text().splitlines()]
@@ -99,6 +102,7 @@ def main() -> int:
     for key in ("checkpoint", "eval_videos", "learning_curve", "metrics"):
         print(f"{key:>15}: {summary[key]}")
     summary["command"] = shlex.join([sys.executable, *sys.argv])
+    summary["preset"] = args.preset
     (out / "demo_summary.json").write_text(json.dumps(summary, indent=2))
     if summary["pc_success"] < args.min_success:
         print(f"FAILED: success {summary['pc_success']:.1f}% < {args.min_success}%", file=sys.stderr)

@@ -51,8 +51,6 @@ class ExperimentConfig:
     steps: int | None = None
     device: str = "cpu"
     n_envs: int = 2
-    # 1 keeps runs fast when the CPU is shared (OpenMP spin-waiting otherwise dominates).
-    torch_threads: int = 1
     plot_only: bool = False
     # Extra table rows at these env-step budgets (methods run to different budgets compare at a shared one).
     table_env_steps: list[int] = field(default_factory=list)
@@ -97,7 +95,6 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
         f"--env_eval_freq={preset.env_eval_freq}",
         f"--save_freq={steps}",
         f"--seed={seed}",
-        f"--online.torch_threads={cfg.torch_threads}",
         f"--output_dir={out}",
         *cfg.extra_args,
     ]

@@ -59,7 +59,7 @@ def test_eval_goals_flags_goals_the_encoder_clips():
     from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
     from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
-    cfg = IndicatorDDPGConfig(device="cpu", hidden_dims=[8, 8, 8], input_clip=5.0)
+    cfg = IndicatorDDPGConfig(device="cpu", hidden_dims=[8, 8, 8], input_clip=5.0, horizon=25)
     vec, rgb = PolicyFeature(FeatureType.STATE, (3,)), PolicyFeature(FeatureType.VISUAL, (3, 32, 32))
     cfg.input_features = {
         "observation.state": vec,

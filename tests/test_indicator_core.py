@@ -12,7 +12,9 @@ STATE, GOAL = "observation.state", "observation.goal_state"
 
 
 def state_config(**kwargs) -> IndicatorDDPGConfig:
-    cfg = IndicatorDDPGConfig(device="cpu", hidden_dims=[32, 32, 32], **kwargs)
+    cfg = IndicatorDDPGConfig(
+        device="cpu", hidden_dims=[32, 32, 32], **{"horizon": 25, "observation_keys": [STATE], **kwargs}
+    )
     cfg.input_features = {
         STATE: PolicyFeature(FeatureType.STATE, (3,)),
         GOAL: PolicyFeature(FeatureType.STATE, (3,)),

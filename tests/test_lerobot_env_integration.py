@@ -111,7 +111,9 @@ def test_lerobot_eval_cli_runs_on_env_config_file(config, tmp_path):
     keys = ["observation.state"]
     if env_cfg.obs_type == "rgbd":
         keys = ["observation.images.front", "observation.images.front_depth"]
-    policy_cfg = IndicatorDDPGConfig(observation_keys=keys, device="cpu", push_to_hub=False)
+    policy_cfg = IndicatorDDPGConfig(
+        observation_keys=keys, horizon=env_cfg.episode_length, device="cpu", push_to_hub=False
+    )
     ckpt = tmp_path / "ckpt"
     make_policy(policy_cfg, env_cfg=env_cfg).save_pretrained(ckpt)
     for processor in make_pre_post_processors(policy_cfg, dataset_stats=None):

@@ -252,3 +252,34 @@ def test_config_errors_name_the_bad_option(tmp_path, arg, message):
     )
     with pytest.raises(ValueError, match=message):
         cfg.validate()
+
+
+def test_wandb_offline_run_holds_the_logged_metrics(tmp_path):
+    out = tmp_path / "run"
+    _train(
+        out, *ENVS["sawyer_reach"], "--steps=10", "--wandb.enable=true", "--wandb.mode=offline",
+        "--wandb.project=indicator-test", "--wandb.disable_artifact=true",
+    )  # fmt: skip
+    runs = list((out / "wandb").glob("offline-run-*/run-*.wandb"))
+    assert len(runs) == 1, list((out / "wandb").iterdir())
+    logged = _wandb_history(runs[0])
+    last = _metrics(out)[-1]
+    assert logged["train/critic_loss"] == pytest.approx(last["critic_loss"])
+    assert logged["eval/eval_success_rate"] == pytest.approx(last["eval_success_rate"])
+    assert logged["train/learning_curve/_type"] == "image-file"
+
+
+def _wandb_history(path: Path) -> dict:
+    """The last logged value of every key in an offline wandb run file (its protobuf records)."""
+    from wandb.proto import wandb_internal_pb2
+    from wandb.sdk.internal.datastore import DataStore
+
+    store, values = DataStore(), {}
+    store.open_for_scan(str(path))
+    while (data := store.scan_data()) is not None:
+        record = wandb_internal_pb2.Record()
+        record.ParseFromString(data)
+        if record.WhichOneof("record_type") == "history":
+            for item in record.history.item:
+                values[item.key or "/".join(item.nested_key)] = json.loads(item.value_json)
+    return values

@@ -23,7 +23,8 @@ def img(c: int, size: int = 32) -> PolicyFeature:
 
 
 def make_config(inputs: dict, **kwargs) -> IndicatorDDPGConfig:
-    cfg = IndicatorDDPGConfig(device="cpu", **{"hidden_dims": [16, 16, 16], **kwargs})
+    defaults = {"hidden_dims": [16, 16, 16], "horizon": 25, "observation_keys": [STATE]}
+    cfg = IndicatorDDPGConfig(device="cpu", **{**defaults, **kwargs})
     cfg.input_features, cfg.output_features = dict(inputs), dict(ACTION)
     return cfg
 
@@ -334,3 +335,42 @@ def test_compiled_loss_matches_eager_loss_and_gradients():
         compiled.forward(small, generator=torch.Generator().manual_seed(3))[0],
         eager.forward(small, generator=torch.Generator().manual_seed(3))[0],
     )
+
+
+def test_default_keys_are_the_cameras_never_the_state_and_state_is_logged_when_chosen(caplog):
+    inputs = {RGB: img(3), DEPTH: img(1), GOAL_RGB: img(3), GOAL_DEPTH: img(1), STATE: vec(), GOAL: vec()}
+    cfg = make_config(inputs, observation_keys=None)
+    cfg.input_features["observation.gt_achieved_goal"] = vec()
+    cfg.input_features["observation.gt_desired_goal"] = vec()
+    cfg.validate_features()
+    assert cfg.observation_keys == [RGB, DEPTH]
+    state_only = make_config(
+        {STATE: vec(), GOAL: vec(), "observation.gt_achieved_goal": vec()}, observation_keys=None
+    )
+    state_only.validate_features()
+    assert state_only.observation_keys == [STATE]
+    with caplog.at_level("WARNING"):
+        make_config(inputs, observation_keys=[STATE]).validate_features()
+    assert "although the data has the camera keys" in caplog.text and RGB in caplog.text
+    with pytest.raises(ValueError, match="no observation key with a goal"):
+        make_config({STATE: vec()}, observation_keys=None).validate_features()
+
+
+def test_horizon_comes_from_the_data_and_a_different_given_value_is_an_error():
+    from types import SimpleNamespace
+
+    from lerobot_indicator.policy.modeling_indicator_ddpg import dataset_horizon
+
+    cfg = IndicatorDDPGConfig(device="cpu", horizon=None)
+    with pytest.raises(ValueError, match="horizon T is not known"):
+        _ = cfg.gamma
+    cfg.set_horizon(3, source="dataset x")
+    assert cfg.gamma == pytest.approx(2 / 3) and cfg.q0 == pytest.approx(0.5 * (-1 + 2 + 3))
+    with pytest.raises(ValueError, match=r"--policy.horizon=3 but the episodes of the env rope have T = 25"):
+        cfg.set_horizon(25, source="env rope")
+    meta = SimpleNamespace(repo_id="u/rope", episodes={"length": [4, 4, 4]})
+    assert dataset_horizon(meta) == 3
+    with pytest.raises(ValueError, match=r"mixes episode lengths \[4, 26\]"):
+        dataset_horizon(SimpleNamespace(repo_id="u/mixed", episodes={"length": [4, 26]}))
+    # The paper's natural initial Q, R-/(1-gamma) = -25 at T = 25, is accepted despite float rounding.
+    IndicatorDDPGConfig(device="cpu", horizon=25, q_init=-25.0)

@@ -7,7 +7,14 @@ import torch
 
 from lerobot_indicator.bench.updates import make_batch, make_policy, rgbd_features
 from lerobot_indicator.policy import indicator_core as core
-from lerobot_indicator.policy.networks_indicator_ddpg import as_float, native_bf16, random_shift, use_bf16
+from lerobot_indicator.policy import networks_indicator_ddpg as networks
+from lerobot_indicator.policy.networks_indicator_ddpg import (
+    as_float,
+    draw_shifts,
+    native_bf16,
+    random_shift,
+    use_bf16,
+)
 
 SMALL = {"hidden_dims": [16, 16, 16], "conv_precision": "float32"}
 RGB, DEPTH = "observation.images.front", "observation.images.front_depth"
@@ -46,7 +53,7 @@ def test_random_shift_is_a_clamped_translation_shared_by_all_keys():
     rgb = (ys * w + xs).to(torch.uint8).expand(b, 3, h, w).contiguous()
     depth = (1000 + ys * w + xs).float().expand(b, 1, h, w).contiguous()
     torch.manual_seed(0)
-    out_rgb, out_depth = random_shift([rgb, depth], pad)
+    out_rgb, out_depth = random_shift([rgb, depth], draw_shifts(b, pad, rgb.device))
     assert out_rgb.dtype == torch.uint8 and out_rgb.is_contiguous(memory_format=torch.channels_last)
     seen = set()
     for i in range(b):
@@ -159,3 +166,26 @@ def test_bf16_only_where_asked_or_native():
     assert use_bf16("auto", "cpu") == native_bf16("cpu")
     flags = Path("/proc/cpuinfo").read_text()
     assert native_bf16("cpu") == ("avx512_bf16" in flags or "amx_bf16" in flags)
+
+
+def test_one_shift_per_transition_is_shared_by_its_observation_next_observation_and_goal(monkeypatch):
+    policy, batch = policy_and_batch(batch_size=16)
+    seen = []
+    original = networks.random_shift
+
+    def spy(frames, shift):
+        seen.append(shift.clone())
+        return original(frames, shift)
+
+    monkeypatch.setattr(networks, "random_shift", spy)
+    policy.forward(batch, generator=torch.Generator().manual_seed(9))
+    source = core.relabel_sources(
+        batch[core.HAS_FUTURE], policy.config, None, torch.Generator().manual_seed(9)
+    ).source
+    rest = (source != core.SOURCE_NEXT).nonzero().squeeze(1)
+    (shift,) = seen  # one conv pass: [o_t, o_{t+1}, goals that are not o_{t+1}]
+    b = 16
+    assert shift.shape == (2, 2 * b + len(rest)) and shift.abs().max() <= policy.config.augment_pad
+    assert torch.equal(shift[:, :b], shift[:, b : 2 * b])
+    assert torch.equal(shift[:, 2 * b :], shift[:, :b][:, rest])
+    assert len({tuple(c) for c in shift[:, :b].T.tolist()}) > 1  # transitions get different shifts

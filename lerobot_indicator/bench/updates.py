@@ -33,7 +33,7 @@ STATE_FEATURES: Features = {"observation.state": (FeatureType.STATE, (3,))}
 
 
 def make_policy(features: Features, device: str = "cpu", **config: object) -> IndicatorDDPGPolicy:
-    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), **config)
+    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), **{"horizon": 25, **config})
     cfg.input_features = {}
     for key, (ftype, shape) in features.items():
         cfg.input_features[key] = cfg.input_features[goal_key(key)] = PolicyFeature(ftype, shape)

@@ -1,5 +1,6 @@
 """Configuration of the ``indicator_ddpg`` policy (Lin, Baweja, Held, CoRL 2019, section 5 and appendix)."""
 
+import logging
 from dataclasses import dataclass, field
 
 from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
@@ -54,11 +55,14 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     (``keys.goal_key``) bit for bit. The networks see exactly these keys and their goals.
     """
 
-    # Compared observation keys; goals are ``goal_key(k)``. Images and states may be mixed.
-    observation_keys: list[str] = field(default_factory=lambda: ["observation.state"])
+    # Compared observation keys; goals are ``goal_key(k)``. Images and states may be mixed. None = every
+    # camera key of the dataset / env that has a goal (never the state when there are cameras: training on
+    # observation.state must be asked for by name), or its state keys when it has no camera.
+    observation_keys: list[str] | None = None
 
-    # Episode horizon T: gamma = (T-1)/T and the filter threshold q0 follow from it.
-    horizon: int = 25
+    # Episode horizon T: gamma = (T-1)/T and the filter threshold q0 follow from it. None = the episode length
+    # of the dataset (lerobot-train) or of the env (lerobot-indicator-train); a given value must match it.
+    horizon: int | None = None
 
     # Reward: "indicator" (the paper's method) or "oracle" (ground-truth distance <= oracle_epsilon).
     reward: str = "indicator"
@@ -128,6 +132,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # compilation (tens of seconds on CPU, needs a C++ compiler). Same names as LeRobot's pi0 config.
     compile_model: bool = False
     compile_mode: str = "default"
+    # torch intra-op threads while this policy trains or acts on CPU (both trainers and lerobot-eval build it),
+    # None = torch's default. 1 is the fastest on the project's 2-core machines, whose second core also runs
+    # env workers and data loading: OpenMP threads spinning against them made updates slower, not faster
+    # (docs/results/policy_updates.json has the measurement).
+    cpu_threads: int | None = 1
     # Exploration (used by the online trainer only, never by select_action).
     noise_eps: float = 0.2
     random_eps: float = 0.3
@@ -148,9 +157,9 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not self.observation_keys:
+        if self.observation_keys is not None and not self.observation_keys:
             raise ValueError("observation_keys must name at least one compared observation key")
-        for key in self.observation_keys:
+        for key in self.observation_keys or []:
             if is_ground_truth_key(key):
                 raise ValueError(
                     f"{key!r} is a ground-truth key: it is for evaluation and the oracle baseline only and "
@@ -159,8 +168,8 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             if is_goal_key(key):
                 raise ValueError(f"{key!r} is a goal key; list the observation key it is the goal of instead")
             goal_key(key)  # raises on keys outside observation.*
-        if self.horizon < 2:
-            raise ValueError(f"horizon must be >= 2 (gamma = (T-1)/T), got {self.horizon}")
+        if self.horizon is not None:
+            self.set_horizon(self.horizon)
         if self.reward not in REWARD_MODES:
             raise ValueError(f"reward must be one of {REWARD_MODES}, got {self.reward!r}")
         if not self.positive_reward > self.negative_reward:
@@ -178,10 +187,6 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if not self.future_offsets or min(self.future_offsets) < 2:
             raise ValueError(
                 f"future_offsets must be non-empty and all >= 2 (t' >= t+2), got {self.future_offsets}"
-            )
-        if self.q_init is not None and not self.q_min <= self.q_init < self.q0:
-            raise ValueError(
-                f"q_init must be in [R-/(1-gamma), q0) = [{self.q_min}, {self.q0}), got {self.q_init}"
             )
         if not 0 <= self.tau <= 1:
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")
@@ -202,14 +207,40 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if self.augment_pad < 0:
             raise ValueError(f"augment_pad must be >= 0 pixels, got {self.augment_pad}")
 
+    def set_horizon(self, horizon: int, source: str | None = None) -> None:
+        """Set T from the data (``source`` names where it comes from); a different given value is an error."""
+        if source is not None and self.horizon is not None and self.horizon != horizon:
+            raise ValueError(
+                f"--policy.horizon={self.horizon} but the episodes of the {source} have T = {horizon} steps: "
+                "leave horizon unset to take it from the data, or use data of that horizon"
+            )
+        if horizon < 2:
+            raise ValueError(f"horizon must be >= 2 (gamma = (T-1)/T), got {horizon}")
+        self.horizon = int(horizon)
+        if self.q_init is not None and not self.q_min <= self.q_init < self.q0:
+            raise ValueError(
+                f"q_init must be in [R-/(1-gamma), q0) = [{self.q_min}, {self.q0}), got {self.q_init}"
+            )
+
     # Paper quantities derived from the horizon.
     @property
     def gamma(self) -> float:
+        if self.horizon is None:
+            raise ValueError(
+                "the horizon T is not known yet: it comes from the dataset or env the policy is made for, "
+                "or from --policy.horizon"
+            )
         return (self.horizon - 1) / self.horizon
 
     @property
     def q_min(self) -> float:
-        return self.negative_reward / (1 - self.gamma)
+        return self.negative_reward * self.discounted_steps
+
+    @property
+    def discounted_steps(self) -> float:
+        """1 / (1 - gamma) = T exactly (computing it from gamma rounds: R-/(1-gamma) was -24.999999999999982)."""
+        _ = self.gamma  # raises while T is unknown
+        return float(self.horizon)
 
     @property
     def initial_q(self) -> float:
@@ -217,26 +248,44 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     @property
     def q_max(self) -> float:
-        return self.positive_reward / (1 - self.gamma)
+        return self.positive_reward * self.discounted_steps
 
     @property
     def q0(self) -> float:
         """Filter threshold 0.5 [R- + gamma R+/(1-gamma) + R+/(1-gamma)] (appendix table)."""
-        g = self.gamma
-        r_pos, r_neg = self.positive_reward, self.negative_reward
-        return 0.5 * (r_neg + g * r_pos / (1 - g) + r_pos / (1 - g))
+        r_pos, r_neg, n = self.positive_reward, self.negative_reward, self.discounted_steps
+        return 0.5 * (r_neg + self.gamma * r_pos * n + r_pos * n)
 
     @property
     def goal_keys(self) -> list[str]:
         return [goal_key(k) for k in self.observation_keys]
 
     def validate_features(self) -> None:
-        """Check the compared keys and their goals against ``input_features``, then keep only those as inputs.
+        """Choose (when not given) and check the compared keys and their goals against ``input_features``,
+        then keep only those as inputs.
 
         ``make_policy`` fills ``input_features`` with every ``observation.*`` feature of the dataset (ground
         truth included); the networks use exactly the compared keys and their goals.
         """
         features = self.input_features or {}
+        cameras = default_observation_keys(features, FeatureType.VISUAL)
+        if self.observation_keys is None:
+            self.observation_keys = cameras or default_observation_keys(features, None)
+            if not self.observation_keys:
+                raise ValueError(
+                    f"no observation key with a goal ({goal_key('observation.x')!r} form) among the input "
+                    f"features {sorted(features)}: pass --policy.observation_keys"
+                )
+            logging.info("indicator_ddpg compares and conditions on %s", self.observation_keys)
+        elif cameras and not any(
+            features.get(k) and features[k].type is FeatureType.VISUAL for k in self.observation_keys
+        ):
+            logging.warning(
+                "indicator_ddpg trains on %s although the data has the camera keys %s: the reward and the "
+                "inputs use no image (as asked by --policy.observation_keys)",
+                self.observation_keys,
+                cameras,
+            )
         for key in self.observation_keys:
             gkey = goal_key(key)
             if key not in features and gkey in features:
@@ -305,3 +354,16 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     def get_scheduler_preset(self) -> None:
         return None
+
+
+def default_observation_keys(features: dict[str, PolicyFeature], kind: FeatureType | None) -> list[str]:
+    """Observation keys of ``kind`` (None: any but images) that have a goal, never ground truth or goals."""
+    return [
+        k
+        for k, ft in features.items()
+        if k.startswith("observation.")
+        and not is_goal_key(k)
+        and not is_ground_truth_key(k)
+        and goal_key(k) in features
+        and ((ft.type is kind) if kind is not None else ft.type is not FeatureType.VISUAL)
+    ]

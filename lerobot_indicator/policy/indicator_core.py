@@ -28,7 +28,7 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, encode_frames
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames
 
 ACTION = "action"
 NEXT = "next."
@@ -170,15 +170,22 @@ def encode_batch(
     inputs every goal is encoded, which gives the same values.
     """
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
-    if dedupe:
-        rest = (source != SOURCE_NEXT).nonzero().squeeze(1)
-        goal_rest = {k: v[rest] for k, v in goal.items()}
+    everyone = torch.arange(source.shape[0], device=source.device)
+    rest = (source != SOURCE_NEXT).nonzero().squeeze(1) if dedupe else everyone
+    goal_rest = {k: v[rest] for k, v in goal.items()}
+    # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
+    # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
+    # few-pixel displacement an action makes into the shift noise.
+    shift = draw_shifts(source.shape[0], config.augment_pad, source.device) if config.image_keys else None
+
+    def shifts(*rows: Tensor) -> list[Tensor] | None:
+        return None if shift is None else [shift[:, r] for r in rows]
 
     def encode_with_next(encoder: nn.Module, frames: list[dict[str, Tensor]]) -> list[Tensor]:
-        """Encodings of ``frames`` + [o_{t+1}, g], the goal's sharing o_{t+1}'s where they are one frame."""
-        if not dedupe:
-            return encode_frames(encoder, [*frames, next_obs, goal], augment=True)
-        *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], augment=True)
+        """Encodings of ``frames`` (the batch's o_t) + [o_{t+1}, g], the goal's sharing o_{t+1}'s where they
+        are one frame."""
+        rows = shifts(*[everyone] * (len(frames) + 1), rest)
+        *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
         return [*h, h_next, h_next.index_put((rest,), h_rest)]
 
     if config.shared_encoder:
@@ -193,8 +200,8 @@ def encode_batch(
         target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
         target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
     return Features(
-        critic=critic.encode(obs, goal, augment=True),
-        actor=actor.encode(obs, goal, augment=True),
+        critic=critic.encode(obs, goal, shift),
+        actor=actor.encode(obs, goal, shift),
         target_critic=target_c,
         target_actor=target_a,
     )

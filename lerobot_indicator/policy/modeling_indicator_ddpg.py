@@ -29,7 +29,16 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         dataset_meta=None,
     ):
         super().__init__(config)
+        if config.cpu_threads and torch.device(config.device or "cpu").type == "cpu":
+            torch.set_num_threads(config.cpu_threads)
         config.validate_features()
+        if dataset_meta is not None and getattr(dataset_meta, "episodes", None) is not None:
+            config.set_horizon(dataset_horizon(dataset_meta), source=f"dataset {dataset_meta.repo_id}")
+        if config.horizon is None:
+            raise ValueError(
+                "indicator_ddpg needs the episode horizon T: pass --policy.horizon, or make the policy for a "
+                "dataset or env (its episode length is used)"
+            )
         self.config = config
         self.actor = Actor(config, dataset_stats)
         shared = self.actor.encoder if config.shared_encoder else None
@@ -115,3 +124,15 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         )
         use_random = torch.rand(action.shape[0], generator=generator, device=gen_device).to(action.device)
         return torch.where((use_random < random_eps)[:, None], rand_action, action)
+
+
+def dataset_horizon(dataset_meta) -> int:
+    """T of a recorded dataset: each episode holds o_0..o_T as T + 1 frames (docs/dataset_format.md), and
+    the indicator reward's gamma and q0 assume one fixed horizon."""
+    lengths = sorted(set(dataset_meta.episodes["length"]))
+    if len(lengths) != 1:
+        raise ValueError(
+            f"dataset {dataset_meta.repo_id} mixes episode lengths {lengths[:5]}: indicator_ddpg needs one "
+            "fixed horizon (gamma and q0 follow from it)"
+        )
+    return int(lengths[0]) - 1

@@ -105,7 +105,7 @@ class ObservationEncoder(nn.Module):
     statistics: relabeled goals (o_{t+1}, o_{t'}) and recorded goals share one representation. Images (stacked
     as channels) go through the conv layers, then a flatten (or the spatial softmax) and, for the "drq"
     encoder, a linear projection with LayerNorm + tanh. Images are randomly shifted first
-    (``augment_pad``) when asked: by the learning core, never when acting.
+    when asked (``draw_shifts``): by the learning core, never when acting.
     """
 
     def __init__(
@@ -196,15 +196,15 @@ class ObservationEncoder(nn.Module):
     def normalize(self, key: str, x: Tensor) -> Tensor:
         return self.standardize(key, x).clamp(-self.input_clip, self.input_clip)
 
-    def forward(self, obs: dict[str, Tensor], augment: bool = False) -> Tensor:
-        """Features of a batch of frames; ``augment``: randomly shift the images (the learning core's
-        updates; actions are always chosen from the frames as they are)."""
+    def forward(self, obs: dict[str, Tensor], shift: Tensor | None = None) -> Tensor:
+        """Features of a batch of frames; ``shift`` (``draw_shifts``): translate each frame's images first
+        (the learning core's updates; actions are always chosen from the frames as they are)."""
         parts = [self.normalize(k, as_float(obs[k])).flatten(1) for k in self.state_keys]
         if self.conv is not None:
-            parts.append(self.trunk(self.conv_features(obs, augment)))
+            parts.append(self.trunk(self.conv_features(obs, shift)))
         return torch.cat(parts, dim=1)
 
-    def conv_features(self, obs: dict[str, Tensor], augment: bool = False) -> Tensor:
+    def conv_features(self, obs: dict[str, Tensor], shift: Tensor | None = None) -> Tensor:
         """Conv feature maps (float32) of the image keys, stacked as channels.
 
         Frames may arrive as stored (uint8 RGB, uint16 depth: the replay buffer's packing) or as float32. The
@@ -213,8 +213,8 @@ class ObservationEncoder(nn.Module):
         the frames are shifted in their stored dtype and cast once to the conv precision.
         """
         frames = [obs[k] for k in self.image_keys]
-        if augment and self.augment_pad > 0:
-            frames = random_shift(frames, self.augment_pad)
+        if shift is not None:
+            frames = random_shift(frames, shift)
         device = frames[0].device.type
         bf16 = use_bf16(self.conv_precision, device)
         if self.fold_normalization:
@@ -260,20 +260,27 @@ def as_float(x: Tensor) -> Tensor:
     return x if x.dtype == torch.float32 else x.float()
 
 
-def random_shift(frames: list[Tensor], pad: int) -> list[Tensor]:
-    """DrQ's random shift (pad ``pad`` pixels by edge replication, random crop back), one shift per frame
-    shared by all its keys, so RGB and depth stay aligned.
+def draw_shifts(n: int, pad: int, device: torch.device) -> Tensor | None:
+    """DrQ's random shift of ``n`` frames: integer (dy, dx) in [-pad, pad], shape (2, n), from torch's global
+    RNG (both trainers seed it); None when ``pad`` is 0."""
+    if pad <= 0:
+        return None
+    return torch.randint(-pad, pad + 1, (2, n), device=device)
 
-    LeRobot's ``lerobot.rl.buffer.random_shift`` draws a shift per call (per key) and pads a copy first; here
-    the replicating pad is folded into clamped indices of one ``index_select`` per key (no padded copy) and
-    frames keep their stored dtype (uint8 moves a quarter of float32's bytes): 2x faster on CPU
-    (docs/policy.md). Draws from torch's global RNG, which both trainers seed. Returns channels-last tensors.
+
+def random_shift(frames: list[Tensor], shift: Tensor) -> list[Tensor]:
+    """Translate frame i of every key by ``shift[:, i]`` pixels, replicating the edges (DrQ's pad + crop), so
+    RGB and depth of a frame stay aligned. Returns channels-last tensors in the frames' dtype.
+
+    LeRobot's ``lerobot.rl.buffer.random_shift`` draws its own shift per call (per key) and pads a copy first;
+    here the shift is given (the learning core shares one between a transition's o_t, o_{t+1} and goal) and
+    the replicating pad is folded into clamped indices of one ``index_select`` per key, with no padded copy and
+    frames in their stored dtype (uint8 moves a quarter of float32's bytes): 2x faster on CPU.
     """
     b, _, h, w = frames[0].shape
     device = frames[0].device
-    shift = torch.randint(0, 2 * pad + 1, (2, b, 1), device=device) - pad
-    rows = (torch.arange(h, device=device) + shift[0]).clamp_(0, h - 1)  # (b, h)
-    cols = (torch.arange(w, device=device) + shift[1]).clamp_(0, w - 1)  # (b, w)
+    rows = (torch.arange(h, device=device) + shift[0, :, None]).clamp_(0, h - 1)  # (b, h)
+    cols = (torch.arange(w, device=device) + shift[1, :, None]).clamp_(0, w - 1)  # (b, w)
     pixel = torch.arange(b, device=device)[:, None, None] * (h * w) + rows[:, :, None] * w + cols[:, None, :]
     out = []
     for x in frames:
@@ -300,14 +307,14 @@ def use_bf16(precision: str, device_type: str) -> bool:
 
 
 def encode_frames(
-    encoder: ObservationEncoder, parts: list[dict[str, Tensor]], augment: bool = False
+    encoder: ObservationEncoder, parts: list[dict[str, Tensor]], shifts: list[Tensor] | None = None
 ) -> list[Tensor]:
-    """Encode several batches of frames in one call (one conv pass over all of them), split back per batch."""
-    if len(parts) == 1:
-        return [encoder(parts[0], augment)]
+    """Encode several batches of frames in one call (one conv pass over all of them), split back per batch;
+    ``shifts``: one ``(2, n)`` shift per batch (``draw_shifts``), or None for none."""
     merged = {k: torch.cat([p[k] for p in parts]) for k in parts[0]}
     sizes = [next(iter(p.values())).shape[0] for p in parts]
-    return list(encoder(merged, augment).split(sizes))
+    shift = None if shifts is None else torch.cat(shifts, dim=1)
+    return list(encoder(merged, shift).split(sizes))
 
 
 class GoalConditioned(nn.Module):
@@ -316,9 +323,10 @@ class GoalConditioned(nn.Module):
     encoder: ObservationEncoder
     net: nn.Sequential
 
-    def encode(self, obs: dict[str, Tensor], goal: dict[str, Tensor], augment: bool = False) -> Tensor:
-        """``[enc(o), enc(o_g)]``, both encoded in one call."""
-        return torch.cat(encode_frames(self.encoder, [obs, goal], augment), dim=1)
+    def encode(self, obs: dict[str, Tensor], goal: dict[str, Tensor], shift: Tensor | None = None) -> Tensor:
+        """``[enc(o), enc(o_g)]``, both encoded in one call, both shifted by ``shift`` if given."""
+        shifts = None if shift is None else [shift, shift]
+        return torch.cat(encode_frames(self.encoder, [obs, goal], shifts), dim=1)
 
 
 class Actor(GoalConditioned):

@@ -40,9 +40,6 @@ class OnlineConfig:
     # after the first cycle (earlier default: its narrow stats clipped goals outside the first episodes'
     # range, docs/results/README.md). A --policy.path policy keeps its own stats either way.
     input_stats: str = "running"
-    # torch intra-op threads (None = torch's default). On a CPU shared with other jobs, 1 avoids
-    # OpenMP threads spinning against each other (measured: 20 vs 1.2 updates/s, docs/policy.md).
-    torch_threads: int | None = None
 
 
 @dataclass
@@ -75,8 +72,9 @@ class OnlineTrainConfig(HubMixin):
     # In optimisation steps, checked at cycle ends (0 disables). Eval also runs after the last cycle.
     env_eval_freq: int = 400
     save_freq: int = 1000
-    log_freq: int = 200
     save_checkpoint: bool = True
+    # LeRobot's Weights & Biases logging (--wandb.enable=true --wandb.project=...; --wandb.mode=offline works
+    # without a network): every cycle's metrics, the learning-curve figure and the checkpoints.
     wandb: WandBConfig = field(default_factory=WandBConfig)
     # Filled by validate() on --resume: the checkpoint to continue from.
     checkpoint_path: Path | None = field(init=False, default=None)
@@ -128,6 +126,12 @@ class OnlineTrainConfig(HubMixin):
             raise ValueError(
                 "--policy.push_to_hub=true needs --policy.repo_id (or pass --policy.push_to_hub=false)"
             )
+
+    # What LeRobot's WandBLogger reads of a training config besides its fields.
+    is_reward_model_training = False
+
+    def to_dict(self) -> dict:
+        return draccus.encode(self)
 
     @property
     def peft(self) -> None:

@@ -119,16 +119,10 @@ class OnlineTrainer:
         self.out.mkdir(parents=True, exist_ok=True)
         set_seed(cfg.seed)
         o = cfg.online
-        if o.torch_threads:
-            torch.set_num_threads(o.torch_threads)
         self.vec_env = make_env(cfg.env, n_envs=o.n_envs, use_async_envs=o.use_async_envs)[cfg.env.type][0]
         env_pre, env_post = make_env_pre_post_processors(cfg.env, cfg.policy)
         self.horizon = int(self.vec_env.call("_max_episode_steps")[0])
-        if cfg.policy.horizon != self.horizon:
-            logging.info(
-                "policy.horizon %d -> %d (the env's episode length)", cfg.policy.horizon, self.horizon
-            )
-            cfg.policy.horizon = self.horizon
+        cfg.policy.set_horizon(self.horizon, source=f"env {cfg.env.type}")
         epsilon = getattr(cfg.env, "epsilon", None)
         if epsilon is not None and cfg.policy.oracle_epsilon != epsilon:
             logging.info(
@@ -153,6 +147,11 @@ class OnlineTrainer:
         self.n_cycles = math.ceil(cfg.steps / o.updates_per_cycle)
         self.rounds_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs)
         self.dataset = self._open_record_dataset() if cfg.record.repo_id else None
+        self.wandb = None
+        if cfg.wandb.enable and cfg.wandb.project:
+            from lerobot.common.wandb_utils import WandBLogger
+
+            self.wandb = WandBLogger(cfg)
 
     # ---------------- --record.*: rollouts as a LeRobotDataset ----------------
     def _open_record_dataset(self):
@@ -404,11 +403,18 @@ class OnlineTrainer:
             record["wall_time_s"] = self.progress.wall_time_s
             with open(self.out / METRICS_FILE, "a") as f:
                 f.write(json.dumps(record) + "\n")
+            if self.wandb is not None:
+                evals = {k: v for k, v in record.items() if k.startswith("eval_")}
+                self.wandb.log_dict({k: v for k, v in record.items() if k not in evals}, self.progress.step)
+                if evals:
+                    self.wandb.log_dict(evals, self.progress.step, mode="eval")
             if cfg.save_checkpoint and (
                 is_last
                 or (cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq)
             ):
-                self.save_checkpoint()
+                checkpoint = self.save_checkpoint()
+                if self.wandb is not None:
+                    self.wandb.log_policy(checkpoint)
             self._save_state_if_due(is_last)
             bar.update(o.updates_per_cycle)
             bar.set_postfix(
@@ -417,7 +423,12 @@ class OnlineTrainer:
                 q=f"{stats.get('q_mean', float('nan')):.2f}",
             )
         bar.close()
-        plot_learning_curve(self.out / METRICS_FILE, self.out / "learning_curve.png", title=cfg.job_name)
+        curve = self.out / "learning_curve.png"
+        plot_learning_curve(self.out / METRICS_FILE, curve, title=cfg.job_name)
+        if self.wandb is not None:
+            import wandb
+
+            wandb.log({"train/learning_curve": wandb.Image(str(curve))}, step=self.progress.step)
         if self.dataset is not None:
             self.dataset.finalize()
             clear_checkpoint(self.record_cfg.root)  # complete and consistent: nothing to roll back to
@@ -434,6 +445,10 @@ class OnlineTrainer:
         checkpoint journal stays, so ``--resume=true`` rolls it back to the resume state)."""
         if self.dataset is not None:
             self.dataset.finalize()
+        if self.wandb is not None:
+            import wandb
+
+            wandb.finish()
         close_envs({self.cfg.env.type: {0: self.vec_env}})
 
 

@@ -5,7 +5,10 @@ import torch
 from lerobot.configs import FeatureType, PolicyFeature
 
 from lerobot_indicator.policy import indicator_core as core
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.configuration_indicator_ddpg import (
+    IndicatorDDPGConfig,
+    IndicatorDDPGConfigError,
+)
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
 STATE, GOAL = "observation.state", "observation.goal_state"
@@ -47,7 +50,7 @@ def rgbd_config(**kwargs) -> IndicatorDDPGConfig:
     ],
 )
 def test_config_validation_errors(inputs, keys, message):
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises((ValueError, IndicatorDDPGConfigError), match=message):
         make_config(inputs, observation_keys=keys).validate_features()
 
 
@@ -60,11 +63,11 @@ def test_inputs_are_exactly_the_compared_keys_and_goals():
 
 
 def test_bad_hyper_parameters_are_rejected():
-    with pytest.raises(ValueError, match="future_offsets"):
+    with pytest.raises(IndicatorDDPGConfigError, match="future_offsets"):
         IndicatorDDPGConfig(device="cpu", future_offsets=[1, 4])
-    with pytest.raises(ValueError, match="reward must be one of"):
+    with pytest.raises(IndicatorDDPGConfigError, match="reward must be one of"):
         IndicatorDDPGConfig(device="cpu", reward="dense")
-    with pytest.raises(ValueError, match="horizon"):
+    with pytest.raises(IndicatorDDPGConfigError, match="horizon"):
         IndicatorDDPGConfig(device="cpu", horizon=1)
 
 

@@ -17,7 +17,11 @@ from huggingface_hub import constants as hf_constants
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_indicator.data import action_sources, recorder
-from lerobot_indicator.data.checkpoint import JOURNAL_DIR, has_checkpoint, restore_checkpoint
+from lerobot_indicator.data.checkpoint import (
+    JOURNAL_DIR,
+    has_checkpoint,
+    restore_checkpoint,
+)
 from lerobot_indicator.data.recorder import RecordConfig, make_single_env, record
 from lerobot_indicator.envs import RopePushEnvConfig, SawyerReachEnvConfig
 from lerobot_indicator.keys import goal_key
@@ -60,6 +64,14 @@ def load_offline(root: Path, repo_id: str, monkeypatch, **kwargs) -> LeRobotData
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     monkeypatch.setattr(hf_constants, "HF_HUB_OFFLINE", True)
     return LeRobotDataset(repo_id, root=root, video_backend="pyav", **kwargs)
+
+
+def committed_episodes(root: Path) -> int:
+    """The episode count ``root``'s info.json commits (0 while there is none or it is being replaced)."""
+    try:
+        return json.loads((root / "meta" / "info.json").read_text())["total_episodes"]
+    except (FileNotFoundError, json.JSONDecodeError):
+        return 0
 
 
 def tree_digest(root: Path) -> dict[str, str]:
@@ -218,7 +230,7 @@ def test_indicator_reward_marks_an_exact_goal_hit(tmp_path, monkeypatch):
         return vec
 
     class ZeroAction:
-        def reset(self):
+        def reset(self, seed=None):
             pass
 
         def __call__(self, observation, info):
@@ -263,7 +275,9 @@ def test_interrupt_keeps_saved_episodes(tmp_path, monkeypatch):
     assert not list((tmp_path / "ds" / "images").rglob("*.png"))  # no leftovers of the dropped episode
 
 
-def test_killed_recording_keeps_checkpointed_episodes_and_resumes(tmp_path, monkeypatch):
+def test_killed_recording_is_readable_as_it_is_and_resumes(tmp_path, monkeypatch):
+    """SIGKILL at a random moment: every committed episode loads without any recovery step; --resume
+    keeps them all and appends."""
     root = tmp_path / "ds"
     cmd = [
         sys.executable,
@@ -275,30 +289,28 @@ def test_killed_recording_keeps_checkpointed_episodes_and_resumes(tmp_path, monk
         "--num_episodes=10000",
         "--repo_id=test/killed",
         f"--root={root}",
-        "--checkpoint_every_s=0",
     ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    journal = root / JOURNAL_DIR / "checkpoint.json"
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
-            if journal.exists() and json.loads(journal.read_text())["total_episodes"] >= 2:
+            if committed_episodes(root) >= 2:
                 break
             assert proc.poll() is None, "recorder exited early"
-            time.sleep(0.2)
+            time.sleep(0.05)
         else:
-            pytest.fail("recorder never checkpointed 2 episodes")
-        time.sleep(0.3)  # let it get into the middle of another episode
+            pytest.fail("recorder never committed 2 episodes")
+        time.sleep(0.3)  # let it get on with more episodes
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
 
-    assert has_checkpoint(root)
-    kept = restore_checkpoint(root)
-    assert kept >= 2
+    assert not has_checkpoint(root)  # no rollback journal: nothing to roll back
     ds = load_offline(root, "test/killed", monkeypatch)
-    assert ds.num_episodes == kept and len(ds) == kept * F
+    kept = ds.num_episodes
+    assert kept >= 2 and len(ds) == kept * F
     before = [ds[i]["action"] for i in range(len(ds))]
+    assert sorted({int(e) for e in ds.hf_dataset["episode_index"][: len(ds)]}) == list(range(kept))
 
     monkeypatch.setenv("HF_HUB_OFFLINE", "0")
     cfg = RecordConfig(
@@ -308,14 +320,136 @@ def test_killed_recording_keeps_checkpointed_episodes_and_resumes(tmp_path, monk
         policy="random",
         num_episodes=1,
         resume=True,
-        checkpoint_every_s=0,
     )
     record(cfg)
     ds = load_offline(root, "test/killed", monkeypatch)
-    assert ds.num_episodes == kept + 1 and len(ds) == (kept + 1) * F
+    assert ds.num_episodes >= kept + 1 and len(ds) == ds.num_episodes * F  # + a commit the kill cut short
     assert all(torch.equal(ds[i]["action"], a) for i, a in enumerate(before))
-    assert sorted({int(e) for e in ds.hf_dataset["episode_index"]}) == list(range(kept + 1))
-    assert not has_checkpoint(root)
+    assert sorted({int(e) for e in ds.hf_dataset["episode_index"]}) == list(range(ds.num_episodes))
+    assert not (root / JOURNAL_DIR).exists()
+
+
+@pytest.mark.parametrize("policy", ["random", "noisy_scripted"])
+def test_resumed_recording_equals_an_uninterrupted_one(tmp_path, monkeypatch, policy):
+    """Episode e's env seed and action noise depend on e only: 4 episodes in one run == 2 + 2 resumed."""
+    record_tiny(tmp_path / "one", "state", policy=policy, num_episodes=4, seed=3)
+    record_tiny(tmp_path / "two", "state", policy=policy, num_episodes=2, seed=3)
+    record_tiny(tmp_path / "two", "state", policy=policy, num_episodes=2, seed=3, resume=True)
+    one = load_offline(tmp_path / "one", "test/sawyer_reach_state", monkeypatch)
+    two = load_offline(tmp_path / "two", "test/sawyer_reach_state", monkeypatch)
+    assert one.num_episodes == two.num_episodes == 4
+    for episode in range(4):
+        frames = range(episode * F, (episode + 1) * F)
+        a = torch.stack([one[i]["action"] for i in frames])
+        b = torch.stack([two[i]["action"] for i in frames])
+        assert torch.equal(a, b), f"episode {episode}: actions differ"
+        assert torch.equal(one[episode * F]["observation.state"], two[episode * F]["observation.state"])
+    # and the noise differs between episodes (a resumed run does not replay episodes 0, 1)
+    assert not torch.equal(one[0]["action"], one[2 * F]["action"])
+
+
+def test_resume_with_other_env_settings_is_an_error(tmp_path):
+    """A resumed recording may not mix horizons (or any other stored setting): the error names the
+    field, the dataset's value and the given one, and nothing is written."""
+    root = tmp_path / "ds"
+    record_tiny(root, "state", num_episodes=1)
+    digest = tree_digest(root)
+    cfg = RecordConfig(
+        env=SawyerReachEnvConfig(obs_type="state", episode_length=T + 2),
+        repo_id="test/sawyer_reach_state",
+        root=root,
+        num_episodes=1,
+        resume=True,
+    )
+    with pytest.raises(ValueError) as err:
+        record(cfg)
+    message = str(err.value)
+    assert f"env.episode_length: dataset {T}, given {T + 2}" in message and "\n" not in message
+    assert tree_digest(root) == digest
+    cfg = RecordConfig(
+        env=env_cfg(obs_type="state"),
+        repo_id="test/sawyer_reach_state",
+        root=root,
+        num_episodes=1,
+        resume=True,
+    )
+    cfg.r_neg = -2.0
+    with pytest.raises(ValueError, match="r_neg: dataset -1.0, given -2.0"):
+        record(cfg)
+    assert tree_digest(root) == digest
+
+
+@pytest.mark.parametrize("use_videos", [False, True])
+def test_corrupt_frame_fails_with_one_line(tmp_path, monkeypatch, capsys, use_videos):
+    """An image frame that does not read back stops the recording with one line naming the episode,
+    the frame and the file; the episodes before it stay saved, the broken one is not."""
+    from lerobot.datasets import dataset_writer
+
+    real_write = dataset_writer.write_image
+
+    def write_image(image, fpath, compress_level=1):
+        real_write(image, fpath, compress_level)
+        path = Path(fpath)
+        if path.parent.name == "episode-000001" and path.name.startswith("frame-000002"):
+            path.write_bytes(path.read_bytes()[:40])  # truncated, as by a full disk
+
+    monkeypatch.setattr(dataset_writer, "write_image", write_image)
+    root = tmp_path / "ds"
+    with pytest.raises(SystemExit) as exit_info:
+        _cli(
+            monkeypatch,
+            "--env.type=sawyer_reach",
+            "--env.obs_type=rgb",
+            f"--env.episode_length={T}",
+            "--env.camera.width=32",
+            "--env.camera.height=32",
+            "--policy=random",
+            "--num_episodes=3",
+            "--image_writer_threads=0",
+            f"--use_videos={str(use_videos).lower()}",
+            "--repo_id=test/corrupt",
+            f"--root={root}",
+        )
+    assert exit_info.value.code == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if "frame 2" in line]
+    assert len(lines) == 1
+    assert "episode 1, frame 2" in lines[0] and "episode-000001/frame-000002.png" in lines[0]
+    assert not (root / JOURNAL_DIR).exists()  # the broken episode's files went with the stage
+    ds = load_offline(root, "test/corrupt", monkeypatch)
+    assert (ds.num_episodes, len(ds)) == (1, F)
+
+
+def test_restore_keeps_a_consistent_dataset_ahead_of_its_checkpoint(tmp_path, monkeypatch):
+    """A rollback journal left behind by a dataset that was finalized after its checkpoint (an exception
+    or Ctrl-C in the online trainer's --record.*): restoring keeps every episode, it deletes none."""
+    cfg = RecordConfig(
+        env=env_cfg(obs_type="state"), repo_id="test/ahead", root=tmp_path / "ds", num_episodes=1
+    )
+    vec = make_single_env(cfg.env)
+    try:
+        _, info = vec.reset(seed=0)
+        features = recorder.dataset_features(
+            vec.single_observation_space, vec.single_action_space, recorder.unbatch(info), False
+        )
+        cfg.reward_keys = recorder.default_reward_keys(features)
+        dataset = recorder.open_dataset(cfg, features)
+        source = action_sources.RandomActions(vec.action_space, 0)
+        stepper = recorder.EpisodeStepper(vec)
+        for episode in range(3):
+            recorder._record_episode(cfg, stepper, source, dataset, "reach", episode)
+            dataset.save_episode()
+            if episode == 0:
+                dataset = recorder.checkpoint_dataset(cfg, dataset)
+        dataset.finalize()
+    finally:
+        vec.close()
+    assert has_checkpoint(cfg.root)
+    assert restore_checkpoint(cfg.root) == 3
+    assert not has_checkpoint(cfg.root)
+    ds = load_offline(cfg.root, "test/ahead", monkeypatch)
+    assert (ds.num_episodes, len(ds)) == (3, 3 * F)
 
 
 def test_resume_appends_with_fresh_seeds(tmp_path, monkeypatch):

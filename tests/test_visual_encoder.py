@@ -8,6 +8,7 @@ import torch
 from lerobot_indicator.bench.updates import make_batch, make_policy, rgbd_features
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy import networks_indicator_ddpg as networks
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfigError
 from lerobot_indicator.policy.networks_indicator_ddpg import (
     as_float,
     draw_shifts,
@@ -43,7 +44,7 @@ def test_presets_fill_the_conv_fields_and_explicit_values_win():
     assert drq.config.conv_channels == [8, 8, 8, 8] and drq.config.augment_pad == 4
     assert drq.config.shared_encoder and drq.actor.encoder is drq.critic.encoder
     assert drq.target_actor.encoder is drq.target_critic.encoder is not drq.critic.encoder
-    with pytest.raises(ValueError, match="one stride per conv layer"):
+    with pytest.raises(IndicatorDDPGConfigError, match="one stride per conv layer"):
         policy_and_batch(conv_channels=[8, 8])
 
 

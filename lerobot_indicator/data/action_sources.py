@@ -1,5 +1,9 @@
 """What drives the robot while recording: random, a scripted expert (optionally noisy), or a checkpoint.
 
+Randomness (random actions, ``noisy_scripted``'s noise, a stochastic checkpoint policy) is reseeded at
+the start of every episode from ``(seed, episode index)`` (:func:`episode_seed`), so episode ``e`` gets
+the same actions whether it is recorded in one run or after any number of ``--resume`` runs.
+
 The scripted expert reads the env's *ground truth* (``gt_achieved_goal``/``gt_desired_goal``), so it
 is only a data-collection expert (demonstrations, coverage): nothing trained from images may use it.
 An env can provide its own expert as a ``scripted_action()`` method; otherwise the proportional
@@ -18,8 +22,15 @@ import torch
 BUILTIN_POLICIES = ("random", "scripted", "noisy_scripted")
 
 
+def episode_seed(seed: int, episode: int) -> int:
+    """The action-noise seed of episode ``episode``: a stream of its own, independent of the env's reset
+    seed ``seed + episode`` (which seeds the env's own generator with that very integer)."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
+
+
 class ActionSource(Protocol):
-    def reset(self) -> None: ...
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode; ``seed`` (see :func:`episode_seed`) reseeds any randomness."""
 
     def __call__(self, observation: dict, info: dict) -> np.ndarray:
         """Batched env observation/info (one env) -> action of shape (1, action_dim)."""
@@ -30,8 +41,9 @@ class RandomActions:
         self.space = action_space
         self.space.seed(seed)
 
-    def reset(self) -> None:
-        pass
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self.space.seed(seed)
 
     def __call__(self, observation: dict, info: dict) -> np.ndarray:
         return self.space.sample()
@@ -59,8 +71,9 @@ class ScriptedActions:
                 ) from None
             self.steps = np.asarray(ee_cfg.step_sizes, dtype=np.float64)
 
-    def reset(self) -> None:
-        pass
+    def reset(self, seed: int | None = None) -> None:
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
 
     def __call__(self, observation: dict, info: dict) -> np.ndarray:
         if self.env_expert:
@@ -97,8 +110,10 @@ class CheckpointActions:
         )
         self.env_pre, self.env_post = make_env_pre_post_processors(env_cfg=env_cfg, policy_cfg=policy_cfg)
 
-    def reset(self) -> None:
+    def reset(self, seed: int | None = None) -> None:
         self.policy.reset()
+        if seed is not None:  # a stochastic policy samples from torch's global generator
+            torch.manual_seed(seed)
 
     @torch.no_grad()
     def __call__(self, observation: dict, info: dict) -> np.ndarray:

@@ -8,17 +8,27 @@ the T transitions has its ``o_{t+1}`` (for rope push, T = 3, dropping it would l
 data). ``indicator_ddpg`` never samples that frame as ``o_t`` (``drop_n_last_frames=1``). ``next.reward`` is the *indicator* reward:
 R+ only if ``o_{t+1}`` equals the episode's goal observation bit for bit on the compared keys.
 See docs/dataset_format.md.
+
+Every saved episode is committed to ``--root`` before the next one starts (data/checkpoint.py): the
+dataset there is complete and readable by ``LeRobotDataset`` at every instant, so an interruption of
+any kind (Ctrl-C, SIGTERM, SIGKILL, a crash) loses at most the episode in flight, and ``--resume=true``
+never removes a saved episode.
 """
 
 import contextlib
 import json
 import logging
+import signal
+import sys
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import draccus
 import numpy as np
+import PIL.Image
+import pyarrow.parquet as pq
 import torch
 from lerobot.configs import parser
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -28,8 +38,22 @@ from lerobot.utils.utils import init_logging
 from tqdm import tqdm
 
 import lerobot_indicator.envs  # noqa: F401  (registers the task EnvConfigs with draccus)
-from lerobot_indicator.data.action_sources import make_action_source
-from lerobot_indicator.data.checkpoint import clear_checkpoint, restore_checkpoint, write_checkpoint
+from lerobot_indicator.data.action_sources import episode_seed, make_action_source
+from lerobot_indicator.data.checkpoint import (
+    INFO,
+    JOURNAL_DIR,
+    commit_episode,
+    committed_counts,
+    discard_stage,
+    info_json,
+    prepare_stage,
+    recover_recording,
+    restore_checkpoint,
+    stage_root,
+    staged_files,
+    write_atomic,
+    write_checkpoint,
+)
 from lerobot_indicator.data.features import (
     DONE,
     REWARD,
@@ -62,8 +86,8 @@ class RecordConfig:
     reward_keys: list[str] | None = None
     r_pos: float = 1.0
     r_neg: float = -1.0
-    # Finalize + journal at most this often (seconds; 0 = after every episode). A *killed* recorder
-    # loses at most the episodes since the last checkpoint; Ctrl-C and exceptions lose none.
+    # Accepted and unused by this recorder: it commits every episode as it is saved (data/checkpoint.py).
+    # Kept so that command lines passing it still parse.
     checkpoint_every_s: float = 30.0
     # Threads writing PNG/TIFF frames in the background (LeRobot's AsyncImageWriter; 0 = inline).
     image_writer_threads: int = 4
@@ -123,15 +147,176 @@ def _episode_length(vec_env, env_cfg: EnvConfig) -> int:
     return int(limit)
 
 
+# The recorder settings a dataset is recorded with (env config and reward definition), checked on --resume.
+SETTINGS_FILE = "meta/recording.json"
+# EnvConfig fields about how envs are run, not what they produce.
+_RUNNER_FIELDS = ("features", "features_map", "max_parallel_tasks", "disable_env_checker")
+
+
+class RecordingError(Exception):
+    """An error the CLI reports as one line (no traceback)."""
+
+
+class SettingsMismatchError(RecordingError, ValueError):
+    """``--resume`` with settings other than those the dataset was recorded with."""
+
+
+class CorruptFrameError(RecordingError, RuntimeError):
+    """An image/video frame file of the episode being saved cannot be read back."""
+
+
+class RecordingInterrupted(KeyboardInterrupt):
+    """Recording stopped by SIGINT/SIGTERM (or Ctrl-C); every committed episode is kept."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+        self.target_episodes: int | None = None  # the episode count the run was asked to reach
+        self.dropped_episode: int | None = None  # the episode being stepped, if any
+
+
+class _StopSignals:
+    """SIGINT/SIGTERM while recording. Outside :meth:`deferred` they interrupt at once (the episode in
+    flight is dropped); inside it (saving and committing an episode, finishing) they are held until the
+    block is done, so a signal never costs a complete episode; a second signal interrupts at once."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.pending: int | None = None
+        self._deferring = False
+        self._previous: dict = {}
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():  # signal handlers live in the main thread
+            self._previous = {sig: signal.signal(sig, self._handle) for sig in self.SIGNALS}
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+    def _handle(self, signum, frame):
+        if self._deferring and self.pending is None:
+            self.pending = signum
+            return
+        raise RecordingInterrupted(signum)
+
+    @contextlib.contextmanager
+    def deferred(self):
+        self._deferring = True
+        try:
+            yield
+        except Exception as err:  # e.g. video encoder workers killed by the same Ctrl-C
+            if self.pending is not None:
+                raise RecordingInterrupted(self.pending) from err
+            raise
+        finally:
+            self._deferring = False
+
+    def check(self) -> None:
+        if self.pending is not None:
+            raise RecordingInterrupted(self.pending)
+
+
+def recording_settings(cfg: RecordConfig) -> dict:
+    """What a dataset's episodes depend on besides the policy and seed: the env config and the reward."""
+    env = {k: v for k, v in draccus.encode(cfg.env).items() if k not in _RUNNER_FIELDS}
+    settings = {
+        "env": {"type": cfg.env.type, **env},
+        "reward_keys": sorted(cfg.reward_keys or []),
+        "r_pos": cfg.r_pos,
+        "r_neg": cfg.r_neg,
+    }
+    return json.loads(json.dumps(settings, default=str))
+
+
+def _write_settings(cfg: RecordConfig) -> None:
+    write_atomic(cfg.root / SETTINGS_FILE, json.dumps(recording_settings(cfg), indent=2) + "\n")
+
+
+def _flatten(settings: dict, prefix: str = "") -> dict:
+    flat = {}
+    for key, value in settings.items():
+        if isinstance(value, dict) and value:
+            flat.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
+def _leftover_only(root: Path) -> bool:
+    """``root`` holds nothing but the stage of a recording killed before it published anything."""
+    return root.is_dir() and not (root / INFO).exists() and {p.name for p in root.iterdir()} <= {JOURNAL_DIR}
+
+
 def _check_root(cfg: RecordConfig) -> None:
     """Fail before building anything: never overwrite, never resume nothing."""
+    if _leftover_only(cfg.root):  # nothing was saved there: as if it did not exist
+        discard_stage(cfg.root)
+        if not any(cfg.root.iterdir()):
+            cfg.root.rmdir()
     if not cfg.resume and cfg.root.exists():
         raise FileExistsError(
             f"{cfg.root} already exists: pass --resume=true to add episodes to it, or choose another "
             "--root/--repo_id (nothing was overwritten)"
         )
-    if cfg.resume and not (cfg.root / "meta" / "info.json").exists():
+    if cfg.resume and not (cfg.root / INFO).exists():
         raise FileNotFoundError(f"--resume=true but there is no dataset at {cfg.root}")
+
+
+def _last_episode_length(root: Path) -> int | None:
+    files = sorted((root / "meta" / "episodes").glob("*/*.parquet"))
+    if not files:
+        return None
+    lengths = pq.read_table(files[-1], columns=["length"]).column("length").to_pylist()
+    return int(lengths[-1]) if lengths else None
+
+
+def _check_resume(cfg: RecordConfig, features: dict, horizon: int | None) -> None:
+    """Refuse to add episodes that differ in kind from the dataset's: other features, storage, env
+    settings or reward definition. Nothing is written on refusal."""
+    root = cfg.root
+    info = json.loads((root / INFO).read_text())
+    stored = info["features"]
+    existing = {k: v for k, v in stored.items() if k in features}
+    if _comparable(existing) != _comparable(features) or set(features) - set(stored):
+        raise SettingsMismatchError(
+            f"the dataset at {root} was recorded with other features than --env gives now "
+            f"({sorted(set(_comparable(existing).items()) ^ set(_comparable(features).items()))})"
+        )
+    has_videos = any(v["dtype"] == "video" for v in stored.values())
+    if has_videos != cfg.use_videos:
+        raise SettingsMismatchError(
+            f"--use_videos={cfg.use_videos} does not match the dataset at {root} (use_videos={has_videos})"
+        )
+    given = _flatten(recording_settings(cfg))
+    settings_path = root / SETTINGS_FILE
+    if settings_path.exists():
+        recorded = _flatten(json.loads(settings_path.read_text()))
+    else:  # recorded without a settings file: fps and horizon are what the dataset itself tells
+        recorded = {"env.fps": info["fps"]}
+        length = _last_episode_length(root)
+        if horizon is not None and length is not None:
+            recorded["env.episode_length"] = length - 1
+            given = {**given, "env.episode_length": horizon}
+        given = {k: given[k] for k in recorded}
+    unset = "<unset>"
+    diffs = [
+        f"{key}: dataset {json.dumps(recorded.get(key, unset))}, given {json.dumps(given.get(key, unset))}"
+        for key in sorted(set(recorded) | set(given))
+        if recorded.get(key, unset) != given.get(key, unset)
+    ]
+    if diffs:
+        raise SettingsMismatchError(
+            f"--resume: the dataset at {root} was recorded with other settings ({'; '.join(diffs)}); "
+            "record into another --root to use other settings"
+        )
+    if not settings_path.exists():
+        if info["total_episodes"] == 0:
+            _write_settings(cfg)  # nothing recorded yet: this run's settings become the dataset's
+        else:
+            logging.warning("%s has no %s: only fps and the horizon were checked", root, SETTINGS_FILE)
 
 
 def _resume(cfg: RecordConfig) -> LeRobotDataset:
@@ -148,10 +333,12 @@ def checkpoint_dataset(cfg: RecordConfig, dataset: LeRobotDataset) -> LeRobotDat
 
 
 def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
+    """A dataset written straight into ``cfg.root`` (the online trainer's ``--record.*``): crash safety
+    comes from :func:`checkpoint_dataset`'s rollback journal. The recorder uses :class:`StagedRecording`."""
     root = cfg.root
     _check_root(cfg)
     if not cfg.resume:
-        return LeRobotDataset.create(
+        dataset = LeRobotDataset.create(
             cfg.repo_id,
             fps=cfg.env.fps,
             features=features,
@@ -160,19 +347,121 @@ def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
             video_backend="pyav",
             image_writer_threads=cfg.image_writer_threads,
         )
+        _write_settings(cfg)
+        return dataset
     restore_checkpoint(root)  # no-op unless the last recording was killed
-    dataset = _resume(cfg)
-    existing = {k: v for k, v in dataset.meta.features.items() if k in features}
-    if _comparable(existing) != _comparable(features) or set(features) - set(dataset.meta.features):
-        dataset.finalize()
-        raise ValueError(
-            f"the dataset at {root} was recorded with other features than --env gives now "
-            f"({sorted(set(_comparable(existing).items()) ^ set(_comparable(features).items()))})"
+    recover_recording(root)  # no-op unless a staged recording was interrupted
+    _check_resume(cfg, features, horizon=None)
+    return _resume(cfg)
+
+
+def _verify_frames(dataset: LeRobotDataset, episode: int) -> None:
+    """Every image/video frame file of the buffered episode decodes (LeRobot's image writer only logs a
+    failed write, and would embed or encode whatever is on disk)."""
+    writer = dataset.writer
+    if writer.image_writer is not None:
+        writer.image_writer.wait_until_done()
+    for key in dataset.meta.camera_keys:
+        for frame, path in enumerate(writer.episode_buffer.get(key, [])):
+            if path is None:  # fed to a streaming video encoder, never written as a file
+                continue
+            try:
+                with PIL.Image.open(path) as image:
+                    image.load()
+            except Exception as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise CorruptFrameError(
+                    f"episode {episode}, frame {frame}: {key} cannot be read back from {path} ({reason}); "
+                    "the episode was not saved"
+                ) from err
+
+
+class StagedRecording:
+    """LeRobot's writer working in the stage, each saved episode committed to ``cfg.root`` at once.
+
+    See data/checkpoint.py for the commit protocol; ``cfg.root`` is a complete dataset at every instant.
+    """
+
+    def __init__(self, cfg: RecordConfig, features: dict, horizon: int):
+        self.root = cfg.root
+        if cfg.resume:
+            restore_checkpoint(self.root)  # a rollback journal of the online trainer's --record.*
+            recover_recording(self.root)  # finish a commit cut short, drop an episode in flight
+            _check_resume(cfg, features, horizon)
+            stage = prepare_stage(self.root)
+            try:
+                self.dataset = LeRobotDataset.resume(
+                    cfg.repo_id,
+                    root=stage,
+                    video_backend="pyav",
+                    image_writer_threads=cfg.image_writer_threads,
+                )
+            except BaseException:
+                discard_stage(self.root)
+                raise
+        else:
+            stage = stage_root(self.root)
+            self.dataset = LeRobotDataset.create(
+                cfg.repo_id,
+                fps=cfg.env.fps,
+                features=features,
+                root=stage,
+                use_videos=cfg.use_videos,
+                video_backend="pyav",
+                image_writer_threads=cfg.image_writer_threads,
+            )
+            _write_settings(cfg)
+            write_atomic(self.root / INFO, info_json(self.dataset.meta.info.to_dict()))  # 0 episodes
+        info = self.dataset.meta.info
+        self.file_sizes = {
+            "data_files_size_in_mb": info.data_files_size_in_mb,
+            "video_files_size_in_mb": info.video_files_size_in_mb,
+        }
+        # With size limits of 0, LeRobot starts new data, episode-metadata and video files for every
+        # episode, so an episode's files can be closed and committed while the next ones go elsewhere.
+        # In the stage only: the committed info.json keeps the dataset's own limits.
+        info.data_files_size_in_mb = 0
+        info.video_files_size_in_mb = 0
+        self.committed = set(staged_files(stage))
+        self.in_flight: int | None = None  # the episode being stepped (not yet saved)
+
+    @property
+    def total_episodes(self) -> int:
+        return self.dataset.meta.total_episodes
+
+    def save_episode(self, episode: int) -> None:
+        """Save the buffered episode with LeRobot's writer, close its files and commit them."""
+        dataset = self.dataset
+        _verify_frames(dataset, episode)
+        dataset.save_episode()
+        dataset.writer.close_writer()
+        # LeRobot's only way to flush and close the episode-metadata file short of finalize().
+        dataset.meta._close_writer()
+        self.committed = commit_episode(
+            self.root, dataset.meta.info.to_dict() | self.file_sizes, self.committed
         )
-    if dataset.meta.video_keys and not cfg.use_videos or (cfg.use_videos and not dataset.meta.video_keys):
-        dataset.finalize()
-        raise ValueError(f"--use_videos={cfg.use_videos} does not match the dataset at {root}")
-    return dataset
+
+    def committed_dataset(self) -> LeRobotDataset:
+        """The finalized writer pointed at ``cfg.root``: a handle on the committed dataset (counts,
+        ``push_to_hub``) like the finalized writer LeRobot itself leaves; its episode table (and the rest
+        of its metadata) is reloaded from ``cfg.root`` when first read, so nothing large is loaded here."""
+        dataset, meta = self.dataset, self.dataset.meta
+        for obj in (dataset, meta):
+            obj.root = obj._requested_root = self.root
+        for name, size in self.file_sizes.items():
+            setattr(meta.info, name, size)
+        meta.episodes = None
+        return dataset
+
+    def close(self, clean: bool) -> None:
+        """Stop LeRobot's writer and drop the stage (everything it held is committed, or the dropped
+        episode); a commit cut short by a second signal is finished first."""
+        if clean:
+            self.dataset.finalize()
+        else:
+            with contextlib.suppress(Exception):  # waits for (and stops) the image writer threads
+                self.dataset.finalize()
+        recover_recording(self.root)
 
 
 def _dataset_card(cfg: RecordConfig) -> str:
@@ -188,32 +477,54 @@ def _dataset_card(cfg: RecordConfig) -> str:
 
 
 def record(cfg: RecordConfig) -> LeRobotDataset:
-    """Record ``cfg.num_episodes`` episodes; returns the finalized dataset."""
+    """Record ``cfg.num_episodes`` episodes; returns the finalized dataset at ``cfg.root``.
+
+    Raises :class:`RecordingInterrupted` (a ``KeyboardInterrupt``) on SIGINT/SIGTERM, after the episode
+    being saved (if any) is committed; the episode being stepped is dropped.
+    """
     _check_root(cfg)
     vec_env = make_single_env(cfg.env)
+    target, session = None, None
     try:
-        obs, info = vec_env.reset(seed=cfg.seed)
-        features = dataset_features(
-            vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), cfg.use_videos
-        )
-        cfg.reward_keys = cfg.reward_keys or default_reward_keys(features)
-        unknown = [k for k in cfg.reward_keys if k not in features or goal_key(k) not in features]
-        if unknown:
-            raise ValueError(
-                f"reward_keys {unknown} are not observation keys with a goal in {sorted(features)}"
+        with _StopSignals() as stop:
+            obs, info = vec_env.reset(seed=cfg.seed)
+            features = dataset_features(
+                vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), cfg.use_videos
             )
-        actions = make_action_source(cfg.policy, cfg.env, vec_env, cfg.seed, cfg.noise_std, cfg.device)
-        # One dry call, so a policy that cannot drive this env fails before the dataset exists.
-        actions.reset()
-        dry = np.asarray(actions(obs, info))
-        if dry.size != int(np.prod(vec_env.action_space.shape)):
-            raise ValueError(
-                f"policy {cfg.policy!r} gives actions of shape {dry.shape}, env expects {vec_env.action_space.shape}"
-            )
-        dataset = open_dataset(cfg, features)
-        dataset = _record_episodes(cfg, vec_env, actions, dataset)
+            cfg.reward_keys = cfg.reward_keys or default_reward_keys(features)
+            unknown = [k for k in cfg.reward_keys if k not in features or goal_key(k) not in features]
+            if unknown:
+                raise ValueError(
+                    f"reward_keys {unknown} are not observation keys with a goal in {sorted(features)}"
+                )
+            actions = make_action_source(cfg.policy, cfg.env, vec_env, cfg.seed, cfg.noise_std, cfg.device)
+            # One dry call, so a policy that cannot drive this env fails before the dataset exists.
+            actions.reset()
+            dry = np.asarray(actions(obs, info))
+            if dry.size != int(np.prod(vec_env.action_space.shape)):
+                raise ValueError(
+                    f"policy {cfg.policy!r} gives actions of shape {dry.shape}, env expects {vec_env.action_space.shape}"
+                )
+            session = StagedRecording(cfg, features, _episode_length(vec_env, cfg.env))
+            target = session.total_episodes + cfg.num_episodes
+            clean = False
+            try:
+                _record_episodes(cfg, vec_env, actions, session, stop)
+                clean = True
+            finally:
+                with stop.deferred():
+                    session.close(clean)
+            stop.check()
+    except KeyboardInterrupt as exc:
+        interrupted = exc if isinstance(exc, RecordingInterrupted) else RecordingInterrupted()
+        interrupted.target_episodes = target
+        interrupted.dropped_episode = session.in_flight if session is not None else None
+        if interrupted is exc:
+            raise
+        raise interrupted from exc
     finally:
         vec_env.close()
+    dataset = session.committed_dataset()
     if cfg.push_to_hub:
         dataset.push_to_hub(
             tags=["lerobot-indicator", "indicator-rewards", cfg.env.type, *cfg.tags],
@@ -224,42 +535,31 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
     return dataset
 
 
-def _record_episodes(cfg: RecordConfig, vec_env, actions, dataset: LeRobotDataset) -> LeRobotDataset:
+def _record_episodes(
+    cfg: RecordConfig, vec_env, actions, session: StagedRecording, stop: _StopSignals
+) -> None:
     task = _task_description(vec_env, cfg.env)
     stepper = EpisodeStepper(vec_env)
-    first = dataset.meta.total_episodes
-    write_checkpoint(cfg.root, first)
-    saving, last_checkpoint, frames, t0 = False, time.monotonic(), 0, time.monotonic()
+    first = session.total_episodes
+    frames, t0 = 0, time.monotonic()
     bar = tqdm(range(first, first + cfg.num_episodes), desc=f"recording {cfg.repo_id}", unit="episode")
     try:
         for episode in bar:
-            frames += _record_episode(cfg, stepper, actions, dataset, task, seed=cfg.seed + episode)
-            saving = True
-            dataset.save_episode()
-            saving = False
+            session.in_flight = episode
+            frames += _record_episode(cfg, stepper, actions, session.dataset, task, episode)
+            session.in_flight = None
+            with stop.deferred():
+                session.save_episode(episode)
+            stop.check()
             bar.set_postfix(frames=frames, fps=f"{frames / (time.monotonic() - t0):.1f}")
-            if (
-                time.monotonic() - last_checkpoint >= cfg.checkpoint_every_s
-                and episode + 1 < first + cfg.num_episodes
-            ):
-                dataset = checkpoint_dataset(cfg, dataset)
-                last_checkpoint = time.monotonic()
-    except BaseException:
-        if not saving and dataset.has_pending_frames():
-            dataset.clear_episode_buffer()  # the interrupted episode is dropped, saved ones are kept
-        raise
     finally:
         bar.close()
-        dataset.finalize()
-        if not saving:  # consistent now: the journal is only needed after a kill or a failed save
-            clear_checkpoint(cfg.root)
     logging.info(
         "recorded %d frames in %.1f s (%.1f frames/s)",
         frames,
         time.monotonic() - t0,
         frames / (time.monotonic() - t0),
     )
-    return dataset
 
 
 class EpisodeStepper:
@@ -339,10 +639,12 @@ def write_episode(
 
 
 def _record_episode(
-    cfg: RecordConfig, stepper: EpisodeStepper, actions, dataset: LeRobotDataset, task: str, seed: int
+    cfg: RecordConfig, stepper: EpisodeStepper, actions, dataset: LeRobotDataset, task: str, episode: int
 ) -> int:
-    obs, info = stepper.reset(seed)
-    actions.reset()
+    """Step episode ``episode`` (env reset with ``seed + episode``, action noise seeded from
+    ``(seed, episode)``) into the dataset's episode buffer; returns its frame count."""
+    obs, info = stepper.reset(cfg.seed + episode)
+    actions.reset(seed=episode_seed(cfg.seed, episode))
     frames = [observation_frame(unbatch(obs), unbatch(info))]
     taken = []
     max_steps = _episode_length(stepper.vec_env, cfg.env)
@@ -356,11 +658,38 @@ def _record_episode(
     return write_episode(dataset, frames, taken, cfg.reward_keys, task, cfg.r_pos, cfg.r_neg)
 
 
+def interrupted_message(cfg: RecordConfig, exc: KeyboardInterrupt) -> str:
+    """The one line the CLI ends with after SIGINT/SIGTERM: what is saved, how to continue."""
+    name = signal.Signals(getattr(exc, "signum", signal.SIGINT)).name
+    if not (cfg.root / INFO).exists():
+        return f"{name}: recording stopped before anything was saved (nothing at {cfg.root})"
+    episodes, frames = committed_counts(cfg.root)
+    target = getattr(exc, "target_episodes", None)
+    dropped = getattr(exc, "dropped_episode", None)
+    missing = target - episodes if target is not None else cfg.num_episodes
+    saved = (
+        f"{name}: recording stopped. {episodes} complete episodes ({frames} frames) are saved in "
+        f"{cfg.root} and readable as they are"
+    )
+    if dropped is not None:
+        saved += f"; episode {dropped}, being recorded, was dropped"
+    if missing <= 0:
+        return f"{saved}. All {target} requested episodes are there."
+    return f"{saved}. To record the {missing} missing ones: the same command with --resume=true --num_episodes={missing}"
+
+
 @parser.wrap()
 def main(cfg: RecordConfig) -> None:
     init_logging()
     logging.info("record config:\n%s", json.dumps(asdict(cfg), default=str, indent=2))
-    dataset = record(cfg)
+    try:
+        dataset = record(cfg)
+    except KeyboardInterrupt as exc:
+        print(interrupted_message(cfg, exc), file=sys.stderr, flush=True)
+        raise SystemExit(128 + getattr(exc, "signum", signal.SIGINT)) from None
+    except RecordingError as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(1) from None
     logging.info(
         "dataset at %s: %d episodes, %d frames",
         dataset.root,

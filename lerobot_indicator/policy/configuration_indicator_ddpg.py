@@ -34,6 +34,12 @@ IMAGE_ENCODERS = tuple(ENCODER_PRESETS)
 CONV_PRECISIONS = ("auto", "float32", "bfloat16")
 
 
+class IndicatorDDPGConfigError(Exception):
+    """A bad ``--policy.*`` value. Not a ValueError on purpose: draccus replaces a ValueError raised while it
+    builds a config by "Couldn't instantiate class ...", while other exceptions keep their message, which
+    names the field and the value."""
+
+
 @OptimizerConfig.register_subclass("fused_adam")
 @dataclass
 class FusedAdamConfig(AdamConfig):
@@ -114,6 +120,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # or "auto" = bfloat16 where the device computes it natively (CUDA with bf16; CPUs with AVX512-BF16 or
     # AMX), float32 elsewhere, where bf16 would be emulated and slower (docs/policy.md has the measurements).
     conv_precision: str = "auto"
+    # "drq" only: weight of a self-supervised inverse-dynamics loss on the shared encoder, ||g(enc(o_t),
+    # enc(o_{t+1})) - a_t||^2, which needs no ground truth (the actions are the agent's own) and makes the
+    # features locate what the actions move; 0 = off (the critic loss alone trains the encoder).
+    inverse_dynamics: float = 0.0
     # "drq" only: the target critic keeps its own EMA copy of the encoder (as in SAC-AE / CURL) instead of
     # using the online encoder's features of o_{t+1} and the goal (DrQ-v2).
     target_encoder: bool = False
@@ -157,16 +167,24 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        try:
+            self._check_fields()
+        except ValueError as e:
+            raise IndicatorDDPGConfigError(f"indicator_ddpg config: {e}") from None
+
+    def _check_fields(self) -> None:
         if self.observation_keys is not None and not self.observation_keys:
             raise ValueError("observation_keys must name at least one compared observation key")
         for key in self.observation_keys or []:
             if is_ground_truth_key(key):
                 raise ValueError(
-                    f"{key!r} is a ground-truth key: it is for evaluation and the oracle baseline only and "
+                    f"observation_keys: {key!r} is a ground-truth key: it is for evaluation and the oracle baseline only and "
                     "can never be a policy input (see docs/conventions.md)"
                 )
             if is_goal_key(key):
-                raise ValueError(f"{key!r} is a goal key; list the observation key it is the goal of instead")
+                raise ValueError(
+                    f"observation_keys: {key!r} is a goal key; list the observation key it is the goal of instead"
+                )
             goal_key(key)  # raises on keys outside observation.*
         if self.horizon is not None:
             self.set_horizon(self.horizon)

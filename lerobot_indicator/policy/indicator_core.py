@@ -28,7 +28,7 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, tanh
 
 ACTION = "action"
 NEXT = "next."
@@ -148,6 +148,7 @@ class Features:
     actor: Tensor  # (o_t, g) for pi(o_t, g): the critic's, detached, when the encoder is shared
     target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
     target_actor: Tensor
+    transition: Tensor | None = None  # (o_t, o_{t+1}) with gradients, shared encoder only
 
 
 def encode_batch(
@@ -195,7 +196,13 @@ def encode_batch(
         if config.target_encoder:
             with torch.no_grad():
                 target = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
-        return Features(critic=features, actor=features.detach(), target_critic=target, target_actor=target)
+        return Features(
+            critic=features,
+            actor=features.detach(),
+            target_critic=target,
+            target_actor=target,
+            transition=torch.cat([h_obs, h_next], dim=1),
+        )
     with torch.no_grad():
         target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
         target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
@@ -280,6 +287,12 @@ def indicator_ddpg_loss(
     actor_loss = masked_mean(-q_pi + config.action_l2 * (pi**2).mean(dim=1), keep_f)
 
     valid_f = valid.float()
+    loss = critic_loss + actor_loss
+    inverse_loss = None
+    if critic.inverse is not None and f.transition is not None:
+        predicted = tanh(critic.inverse(f.transition))
+        inverse_loss = masked_mean(((predicted - action) ** 2).mean(dim=1), valid_f)
+        loss = loss + config.inverse_dynamics * inverse_loss
     positive = (reward == config.positive_reward).float()
     stats = {
         "critic_loss": critic_loss.detach(),
@@ -292,9 +305,11 @@ def indicator_ddpg_loss(
         "frac_goal_future": masked_mean((relabel.source == SOURCE_FUTURE).float(), valid_f),
         "frac_goal_recorded": masked_mean((relabel.source == SOURCE_RECORDED).float(), valid_f),
     }
+    if inverse_loss is not None:
+        stats["inverse_dynamics_loss"] = inverse_loss.detach()
     if gt_goal is not None:
         stats |= reward_statistics(reward, batch[GT_NEXT_ACHIEVED], gt_goal, keep, valid, config)
-    return critic_loss + actor_loss, stats
+    return loss, stats
 
 
 def stats_to_floats(stats: dict[str, Tensor]) -> dict[str, float]:

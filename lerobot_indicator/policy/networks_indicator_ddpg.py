@@ -370,6 +370,10 @@ class Critic(GoalConditioned):
         # (paper section 5.3). The minimum achievable return is the natural "low" value.
         last: nn.Linear = self.net[-1]
         nn.init.constant_(last.bias, config.initial_q)
+        # a_t from (enc(o_t), enc(o_{t+1})): an auxiliary loss on the encoder (config.inverse_dynamics).
+        self.inverse = None
+        if config.inverse_dynamics > 0:
+            self.inverse = mlp(2 * self.encoder.out_dim, config.hidden_dims[:1], config.action_dim)
 
     def head(self, features: Tensor, action: Tensor, frozen: bool = False) -> Tensor:
         """Q from ``encode``'s features. ``frozen``: the MLP's weights are detached, so gradients reach

@@ -122,6 +122,28 @@ def test_resume_continues_bit_for_bit(tmp_path):
             assert ra[key] == rb[key], (ra["cycle"], key, ra[key], rb[key])
 
 
+def test_resume_before_the_first_checkpoint_continues_bit_for_bit(tmp_path):
+    """A run stopped before its first LeRobot checkpoint has only its per-cycle resume state; --resume
+    continues from it (the same command plus --resume=true)."""
+    env_args = ENVS["sawyer_reach"]
+    full, split = tmp_path / "full", tmp_path / "split"
+    _train(full, *env_args, "--steps=20")
+    _train(split, *env_args, "--steps=10", "--save_checkpoint=false")
+    assert not (split / "checkpoints").exists() and (split / "resume").is_dir()
+    _train(split, *env_args, "--steps=20", "--resume=true")
+    for ra, rb in zip(_metrics(full), _metrics(split), strict=True):
+        assert ra["critic_loss"] == rb["critic_loss"] and ra["q_mean"] == rb["q_mean"], ra["cycle"]
+
+
+def test_resume_without_a_resume_state_says_what_the_directory_holds(tmp_path):
+    out = tmp_path / "run"
+    (out / "checkpoints").mkdir(parents=True)
+    cmd = [str(BIN / "lerobot-indicator-train"), *TINY, *ENVS["sawyer_reach"], f"--output_dir={out}"]
+    proc = subprocess.run([*cmd, "--resume=true"], capture_output=True, text=True, timeout=300, env=_env())
+    assert proc.returncode != 0
+    assert "has no resume state (resume/); it holds ['checkpoints']" in proc.stderr
+
+
 def test_refuses_to_overwrite_a_run(tmp_path):
     out = tmp_path / "run"
     out.mkdir()

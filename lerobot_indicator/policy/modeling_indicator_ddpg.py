@@ -12,6 +12,7 @@ import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
 from torch import Tensor, nn
 
+from lerobot_indicator.finite import check_batch, check_loss
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
@@ -78,11 +79,13 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
     ) -> tuple[Tensor, dict[str, float]]:
         """Loss and logging stats; ``generator`` drives relabeling (default: torch's global RNG, which
         lerobot-train seeds and restores on resume)."""
+        check_batch(batch)
         if not indicator_core.is_transition_batch(batch, self.config):
             batch = indicator_core.dataset_batch_to_transitions(batch, self.config, generator)
         loss, stats = self._loss(
             batch, self.actor, self.critic, self.target_actor, self.target_critic, self.config, generator
         )
+        check_loss(loss, stats)  # before any backward or optimizer step can spread it into the weights
         return loss, indicator_core.stats_to_floats(stats)
 
     def _split(self, batch: dict[str, Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:

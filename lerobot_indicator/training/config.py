@@ -112,14 +112,22 @@ class OnlineTrainConfig(HubMixin):
             self.output_dir = Path("outputs/train") / f"{now:%Y-%m-%d}/{now:%H-%M-%S}_{self.job_name}"
         self.output_dir = Path(self.output_dir)
         if self.resume:
+            # The per-cycle resume state (resume/) is what a run continues from; a LeRobot checkpoint, when
+            # one exists already, also supplies the policy config, so --policy.* need not be repeated.
             last = self.output_dir / "checkpoints" / "last"
-            if not last.exists():
-                raise FileNotFoundError(f"--resume=true but there is no checkpoint at {last}")
-            self.checkpoint_path = last.resolve()
-            self.policy.pretrained_path = self.checkpoint_path / "pretrained_model"
+            has_state = any((self.output_dir / d).exists() for d in ("resume", "resume.old"))
+            if not has_state:
+                held = sorted(p.name for p in self.output_dir.iterdir()) if self.output_dir.is_dir() else []
+                raise FileNotFoundError(
+                    f"--resume=true but {self.output_dir} has no resume state (resume/); it holds {held or 'nothing'}"
+                )
+            if last.exists():
+                self.checkpoint_path = last.resolve()
+                self.policy.pretrained_path = self.checkpoint_path / "pretrained_model"
         elif self.output_dir.is_dir() and any(self.output_dir.iterdir()):
+            held = sorted(p.name for p in self.output_dir.iterdir())
             raise FileExistsError(
-                f"Output directory {self.output_dir} already exists and --resume=false. "
+                f"Output directory {self.output_dir} already exists (it holds {held}) and --resume=false. "
                 "Pass --resume=true to continue it, or choose another --output_dir."
             )
         if self.policy.push_to_hub and not self.policy.repo_id:

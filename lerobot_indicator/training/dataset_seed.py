@@ -17,6 +17,7 @@ from lerobot.configs.default import DatasetConfig
 from lerobot.datasets import LeRobotDataset
 from tqdm import tqdm
 
+from lerobot_indicator.finite import check_episode
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 
 GT_ACHIEVED, GT_DESIRED = "observation.gt_achieved_goal", "observation.gt_desired_goal"
@@ -55,6 +56,7 @@ def dataset_episodes(dataset: LeRobotDataset, keys: list[str], horizon: int) -> 
             return torch.stack([f[key] for f in frames]).float().numpy()
 
         obs = {k: stack(k) for k in keys}
+        check_episode({**obs, "action": stack("action")}, int(ep), f"dataset {dataset.repo_id}")
         gt = None
         if has_gt:
             gt = {"gt_achieved_goal": stack(GT_ACHIEVED), "gt_desired_goal": stack(GT_DESIRED)[0]}

@@ -33,6 +33,7 @@ from safetensors.torch import load_model, save_model
 from tqdm import tqdm
 
 from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
+from lerobot_indicator.finite import NonFiniteError, check_module
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
@@ -221,6 +222,7 @@ class OnlineTrainer:
         tmp, final, old = (self.out / f"{RESUME_DIR}{s}" for s in (".tmp", "", ".old"))
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
+        check_module(self.policy, "resume state")
         save_model(self.policy, str(tmp / "model.safetensors"))  # handles the shared encoder
         save_optimizer_state(self.optimizer, tmp)
         (tmp / "progress.json").write_text(json.dumps(self.progress.__dict__))
@@ -331,6 +333,7 @@ class OnlineTrainer:
 
     def save_checkpoint(self) -> Path:
         """LeRobot-train layout, loadable by ``lerobot-eval --policy.path=<dir>/pretrained_model``."""
+        check_module(self.policy, "checkpoint")
         ckpt = get_step_checkpoint_dir(self.out, self.cfg.steps, self.progress.step)
         save_checkpoint(
             ckpt,
@@ -465,7 +468,19 @@ def train(cfg: OnlineTrainConfig) -> dict[str, float]:
 def main() -> None:
     init_logging()
     register_third_party_plugins()
-    train()
+    try:
+        train()
+    except NonFiniteError as e:
+        logging.error(
+            "stopped: %s. Nothing non-finite was saved; the last checkpoint and resume state are kept.", e
+        )
+        raise SystemExit(1) from None
+    except KeyboardInterrupt:
+        logging.error(
+            "interrupted: the run continues from its resume/ state (the last completed cycle; with --record, the "
+            "last dataset checkpoint) with the same command and --resume=true"
+        )
+        raise SystemExit(130) from None
 
 
 if __name__ == "__main__":

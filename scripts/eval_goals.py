@@ -24,9 +24,8 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
 from lerobot.policies.factory import make_pre_post_processors
 
-from lerobot_indicator.keys import goal_key
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
-from lerobot_indicator.training.online import EVAL_SEED_OFFSET
 from lerobot_indicator.training.rollout import Processors, run_episodes, stored_keys
 
 

@@ -23,7 +23,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.keys import GOAL_PREFIX
+from lerobot_indicator.keys import GOAL_PREFIX, GT_DISTANCE, depth_key
 
 OBS_TYPES = ("state", "rgb", "rgbd")
 # Evaluation-only env reward (training never uses it: the indicator reward comes from observations).
@@ -31,11 +31,6 @@ OBS_TYPES = ("state", "rgb", "rgbd")
 # "final_distance": 0, then -gt_distance at step episode_length, so lerobot-eval's avg_sum_reward is
 # minus the mean final distance to the goal.
 EVAL_REWARDS = ("success", "final_distance")
-DEPTH_SUFFIX = "_depth"
-
-
-def depth_obs_key(camera: str) -> str:
-    return f"{camera}{DEPTH_SUFFIX}"
 
 
 def _as(cls, value):
@@ -116,8 +111,8 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             depth = gym.spaces.Box(
                 0, np.iinfo(np.uint16).max, shape=(cam.height, cam.width, 1), dtype=np.uint16
             )
-            spaces[depth_obs_key(cam.name)] = depth
-            spaces[depth_obs_key(GOAL_PREFIX + cam.name)] = depth
+            spaces[depth_key(cam.name)] = depth
+            spaces[depth_key(GOAL_PREFIX + cam.name)] = depth
         self.observation_space = gym.spaces.Dict(spaces)
 
     # --- what a task provides -------------------------------------------------------------------
@@ -131,7 +126,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         truncates), and the reward is for evaluation only (``EVAL_REWARDS``)."""
         self._elapsed += 1
         if self.eval_reward == "final_distance":
-            reward = -float(info["gt_distance"]) if self._elapsed == self.episode_length else 0.0
+            reward = -float(info[GT_DISTANCE]) if self._elapsed == self.episode_length else 0.0
         else:
             reward = 1.0 if info["is_success"] else -1.0
         return self._get_obs(), reward, False, False, info
@@ -178,7 +173,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             from lerobot_indicator.envs.rendering import metres_to_uint16_mm
 
             mm = metres_to_uint16_mm(depth_m, cam.depth_min_m, cam.depth_max_m)
-            out[depth_obs_key(prefix + cam.name)] = mm[..., None]
+            out[depth_key(prefix + cam.name)] = mm[..., None]
         return out
 
     def _render_goal_observation(self) -> None:
@@ -199,8 +194,8 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         cam, goal_cam = self.camera_cfg.name, GOAL_PREFIX + self.camera_cfg.name
         obs["pixels"] = {cam: current[cam], goal_cam: self._goal_obs[goal_cam].copy()}
         if self.obs_type == "rgbd":
-            obs[depth_obs_key(cam)] = current[depth_obs_key(cam)]
-            obs[depth_obs_key(goal_cam)] = self._goal_obs[depth_obs_key(goal_cam)].copy()
+            obs[depth_key(cam)] = current[depth_key(cam)]
+            obs[depth_key(goal_cam)] = self._goal_obs[depth_key(goal_cam)].copy()
         return obs
 
     def render(self) -> np.ndarray:

@@ -14,9 +14,9 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
-from lerobot_indicator.envs.base import DEPTH_SUFFIX, EVAL_REWARDS, OBS_TYPES
+from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.keys import GOAL_PREFIX, goal_key
+from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
 
 GYM_NAMESPACE = "lerobot_indicator"
 SAWYER_REACH_TASK = "SawyerReach-v0"
@@ -78,7 +78,7 @@ class SawyerGoalEnvConfig(EnvConfig):
         """Env observation keys of the depth maps (``front_depth``, ``goal_front_depth``)."""
         if self.obs_type != "rgbd":
             return []
-        return [f"{self.camera.name}{DEPTH_SUFFIX}", f"{GOAL_PREFIX}{self.camera.name}{DEPTH_SUFFIX}"]
+        return [depth_key(self.camera.name), depth_key(GOAL_PREFIX + self.camera.name)]
 
     @property
     def package_name(self) -> str:

@@ -46,9 +46,10 @@ class OnlineConfig:
 
 
 @dataclass
-class RecordConfig:
-    """Write every collected (behaviour-policy) episode to a LeRobotDataset, in the recorder's format
-    (docs/dataset_format.md, lossless images). None repo_id = don't."""
+class OnlineRecordConfig:
+    """``--record.*``: write every collected (behaviour-policy) episode to a LeRobotDataset, in the format of
+    ``lerobot_indicator.data.recorder`` (docs/dataset_format.md, lossless images). None repo_id = don't.
+    The trainer builds the recorder's own ``RecordConfig`` from these fields."""
 
     repo_id: str | None = None
     root: str | None = None
@@ -65,7 +66,7 @@ class OnlineTrainConfig(HubMixin):
     # Optional offline data: seeds the replay buffer before online collection.
     dataset: DatasetConfig | None = None
     online: OnlineConfig = field(default_factory=OnlineConfig)
-    record: RecordConfig = field(default_factory=RecordConfig)
+    record: OnlineRecordConfig = field(default_factory=OnlineRecordConfig)
     output_dir: Path | None = None
     job_name: str | None = None
     resume: bool = False

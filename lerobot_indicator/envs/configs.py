@@ -34,7 +34,8 @@ class SawyerGoalEnvConfig(EnvConfig):
     # the last step, 0 before: lerobot-eval's avg_sum_reward is then minus the mean final distance).
     eval_reward: str = "success"
     render_mode: str = "rgb_array"
-    # Draw the robot with its primitive collision shapes for the camera (~10x faster in software GL).
+    # Draw the robot with its primitive collision shapes for the camera: far fewer triangles than robosuite's
+    # meshes for software GL to rasterise (docs/envs.md, docs/results/reach_env_speed.json).
     light_render: bool = True
     camera: GoalCameraConfig = field(default_factory=GoalCameraConfig)
     end_effector: EndEffectorConfig = field(default_factory=EndEffectorConfig)

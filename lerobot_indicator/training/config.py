@@ -37,11 +37,11 @@ class OnlineConfig:
     eval_episodes: int = 20
     # Input normalisation of a policy trained from scratch: "running" = mean/std of every episode in the
     # replay buffer (frames and goals), refreshed each cycle, as baselines' HER; "first_cycle" = frozen
-    # after the first cycle (earlier default: its narrow stats clipped goals outside the first episodes'
-    # range, docs/results/README.md). A --policy.path policy keeps its own stats either way.
+    # after the first cycle (a few episodes' narrow stats clip goals outside their range, so the networks
+    # cannot tell those goals apart: docs/results/README.md). A --policy.path policy keeps its own stats.
     input_stats: str = "running"
     # torch intra-op threads (None = torch's default). On a CPU shared with other jobs, 1 avoids
-    # OpenMP threads spinning against each other (measured: 20 vs 1.2 updates/s, docs/policy.md).
+    # OpenMP threads spinning against each other (docs/results/policy_updates.json).
     torch_threads: int | None = None
 
 

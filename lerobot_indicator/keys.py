@@ -1,7 +1,40 @@
-"""Naming rules shared by envs, datasets, the policy and the trainers (see docs/conventions.md)."""
+"""Key names and constants shared by envs, datasets, the policy and the trainers (see docs/conventions.md).
 
-GT_PREFIX = "observation.gt_"
+Every module takes these names from here, so a key is spelled once.
+"""
+
+OBS_PREFIX = "observation."
+# Goal observations: ``<name>`` -> ``goal_<name>`` (env keys and the last part of batch keys, ``goal_key``).
 GOAL_PREFIX = "goal_"
+# Depth images: camera ``<cam>`` -> ``<cam>_depth`` (env key, dataset feature and batch key).
+DEPTH_SUFFIX = "_depth"
+
+# Ground truth, as the envs' ``info`` dict names it (evaluation and the oracle baseline only) ...
+GT_ACHIEVED_GOAL = "gt_achieved_goal"
+GT_DESIRED_GOAL = "gt_desired_goal"
+GT_DISTANCE = "gt_distance"
+GT_INFO_KEYS = (GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, GT_DISTANCE)
+# ... and as datasets and batches name it: ``observation.gt_*``, never a network input.
+GT_PREFIX = OBS_PREFIX + "gt_"
+OBS_GT_ACHIEVED_GOAL = OBS_PREFIX + GT_ACHIEVED_GOAL
+OBS_GT_DESIRED_GOAL = OBS_PREFIX + GT_DESIRED_GOAL
+OBS_GT_DISTANCE = OBS_PREFIX + GT_DISTANCE
+
+# Evaluation episodes reset with seed EVAL_SEED_OFFSET + i, so they never share a seed with a training
+# episode, and every evaluation (trainer, scripts, benchmarks) sees the same goals.
+EVAL_SEED_OFFSET = 10**9
+
+
+def depth_key(camera: str) -> str:
+    """``front -> front_depth``; works on env keys and batch keys alike."""
+    return f"{camera}{DEPTH_SUFFIX}"
+
+
+def ground_truth_key(info_key: str) -> str:
+    """``gt_distance -> observation.gt_distance``: the dataset / batch key of an ``info`` ground-truth key."""
+    if not info_key.startswith("gt_"):
+        raise ValueError(f"{info_key!r} is not a ground-truth info key (must start with 'gt_')")
+    return OBS_PREFIX + info_key
 
 
 def goal_key(observation_key: str) -> str:
@@ -11,7 +44,7 @@ def goal_key(observation_key: str) -> str:
     ``observation.state -> observation.goal_state``,
     ``observation.images.front -> observation.images.goal_front``.
     """
-    if not observation_key.startswith("observation."):
+    if not observation_key.startswith(OBS_PREFIX):
         raise ValueError(f"{observation_key!r} is not an observation key (must start with 'observation.')")
     head, _, name = observation_key.rpartition(".")
     if name.startswith(GOAL_PREFIX):

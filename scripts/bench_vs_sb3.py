@@ -11,7 +11,7 @@ gradient steps per cycle, the same env-step budget):
 * ``ours_indicator``: ``--policy.reward=indicator --policy.balance=true --policy.filter=true`` (no ground truth).
 
 Evaluation is the same for all: the deterministic actor on the N fixed eval episodes of our trainer
-(``reset(seed=10**9 + i)``), success = ground-truth distance <= epsilon at the last step. Every training run is
+(``reset(seed=EVAL_SEED_OFFSET + i)``), success = ground-truth distance <= epsilon at the last step. Every training run is
 a fresh subprocess, runs are interleaved seed by seed (SB3, oracle, indicator, next seed...) so machine noise
 hits all learners alike, and wall-clock excludes evaluation. Update throughput is measured separately in one
 process on equally filled buffers, blocks interleaved A/B/B/A. Writes ``vs_sb3.json`` and ``vs_sb3.png``.
@@ -35,6 +35,8 @@ import numpy as np
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
+
 # What differs between the SB3 and our learners beyond the shared hyper-parameters (each library's defaults).
 PROTOCOL_DIFFERENCES = [
     "inputs: SB3 concatenates observation, achieved_goal (== observation) and desired_goal (9-d); ours "
@@ -51,7 +53,6 @@ PROTOCOL_DIFFERENCES = [
     "ours writes its resume state (weights, optimizer, new episodes) after every cycle; that time counts",
 ]
 METHODS = ("sb3_ddpg_her", "ours_oracle", "ours_indicator")
-EVAL_SEED_OFFSET = 10**9  # = lerobot_indicator.training.online.EVAL_SEED_OFFSET (checked in run_ours)
 HORIZON = 25
 SUCCESS_TARGET = 0.9
 
@@ -89,7 +90,7 @@ def make_sb3(seed: int, args: argparse.Namespace, learning_starts: int = 0):
 
 
 def evaluate_sb3(model, env, n_episodes: int) -> dict[str, float]:
-    """Our trainer's evaluation protocol: seeds 10**9 + i, deterministic actor, success at step T."""
+    """Our trainer's evaluation protocol: seeds EVAL_SEED_OFFSET + i, deterministic actor, success at step T."""
     success, distance = [], []
     for i in range(n_episodes):
         obs, info = env.reset(seed=EVAL_SEED_OFFSET + i)
@@ -99,7 +100,7 @@ def evaluate_sb3(model, env, n_episodes: int) -> dict[str, float]:
         if not truncated:
             raise RuntimeError("an eval episode did not end at the horizon")
         success.append(bool(info["is_success"]))
-        distance.append(float(info["gt_distance"]))
+        distance.append(float(info[GT_DISTANCE]))
     return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
 
 
@@ -192,9 +193,6 @@ def ours_config(method: str, seed: int, args: argparse.Namespace, output_dir: Pa
 
 def timed_trainer_class():
     from lerobot_indicator.training import online
-
-    if online.EVAL_SEED_OFFSET != EVAL_SEED_OFFSET:
-        raise RuntimeError("online.EVAL_SEED_OFFSET changed: update bench_vs_sb3.EVAL_SEED_OFFSET")
 
     class TimedTrainer(online.OnlineTrainer):
         """Records an eval curve with the training wall-clock (evaluation time excluded)."""

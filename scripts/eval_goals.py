@@ -3,8 +3,8 @@ those goals lie outside its input normalisation (clipped at ``input_clip`` stand
 networks cannot tell them apart).
 
 ``lerobot-eval`` reports per-episode success; this adds the ground-truth start, goal and final positions
-and the clipping check, the two things needed to see *why* a success rate plateaus (it found the
-first-cycle normalisation bug, docs/policy.md). Uses the trainer's evaluation seeds.
+and the clipping check, the two things needed to see *why* a success rate plateaus (e.g. goals outside
+a too narrow input normalisation, docs/policy.md). Uses the trainer's evaluation seeds.
 
     python scripts/eval_goals.py --env.type=sawyer_reach --env.obs_type=state \
         --policy_path=outputs/train/.../checkpoints/last/pretrained_model --out=eval_goals.json
@@ -24,9 +24,8 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
 from lerobot.policies.factory import make_pre_post_processors
 
-from lerobot_indicator.keys import goal_key
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
-from lerobot_indicator.training.online import EVAL_SEED_OFFSET
 from lerobot_indicator.training.rollout import Processors, run_episodes, stored_keys
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from lerobot_indicator.envs.rope_push import RopePushEnv
+from lerobot_indicator.keys import GT_DISTANCE
 
 PX = 200
 
@@ -25,7 +26,7 @@ def main() -> None:
     env = RopePushEnv(obs_type="rgb", camera={"width": PX, "height": PX})
     try:
         obs, info = env.reset(seed=args.seed)
-        panels = [(obs["pixels"]["front"], f"start  (d={info['gt_distance']:.2f})")]
+        panels = [(obs["pixels"]["front"], f"start  (d={info[GT_DISTANCE]:.2f})")]
         panels.append((obs["pixels"]["goal_front"], "goal image (2 hidden pushes)"))
         hidden = env.goal_push_actions
 
@@ -34,7 +35,7 @@ def main() -> None:
         wrong = hidden[0].copy()
         wrong[[1, 3]] = wrong[[3, 1]]
         obs, _, _, _, info = env.step(wrong)
-        wrong_panel = (obs["pixels"]["front"], f"a wrong push  (d={info['gt_distance']:.2f})")
+        wrong_panel = (obs["pixels"]["front"], f"a wrong push  (d={info[GT_DISTANCE]:.2f})")
         env.restore_state(saved)
 
         # Film the first hidden push and keep the frame half-way through it.
@@ -43,10 +44,10 @@ def main() -> None:
         obs, _, _, _, info = env.step(hidden[0])
         env.sim.on_push_step = None
         panels.append((frames[int(len(frames) * 0.6)], "pushing (gripper shown)"))
-        panels.append((obs["pixels"]["front"], f"after hidden push 1  (d={info['gt_distance']:.2f})"))
+        panels.append((obs["pixels"]["front"], f"after hidden push 1  (d={info[GT_DISTANCE]:.2f})"))
         obs, _, _, _, info = env.step(hidden[1])
         ok = "success" if info["is_success"] else "fail"
-        panels.append((obs["pixels"]["front"], f"after push 2  (d={info['gt_distance']:.2f}, {ok})"))
+        panels.append((obs["pixels"]["front"], f"after push 2  (d={info[GT_DISTANCE]:.2f}, {ok})"))
         panels.append(wrong_panel)
     finally:
         env.close()

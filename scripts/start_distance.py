@@ -19,7 +19,7 @@ import numpy as np
 from lerobot.envs import make_env
 from lerobot.envs.configs import EnvConfig
 
-from lerobot_indicator.training.online import EVAL_SEED_OFFSET
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
 
 
 @dataclass
@@ -36,7 +36,7 @@ def main(cfg: StartDistanceConfig) -> dict:
         distances = []
         for i in range(cfg.episodes):
             _, info = vec_env.reset(seed=[EVAL_SEED_OFFSET + i])
-            distances.append(float(np.asarray(info["gt_distance"]).reshape(-1)[0]))
+            distances.append(float(np.asarray(info[GT_DISTANCE]).reshape(-1)[0]))
     finally:
         vec_env.close()
     record = {

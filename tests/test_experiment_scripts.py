@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lerobot_indicator  # noqa: F401  (registers the gym ids)
-from lerobot_indicator.training.online import EVAL_SEED_OFFSET
+from lerobot_indicator.keys import EVAL_SEED_OFFSET
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -5,7 +5,10 @@ import torch
 from lerobot.configs import FeatureType, PolicyFeature
 
 from lerobot_indicator.policy import indicator_core as core
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.configuration_indicator_ddpg import (
+    IndicatorDDPGConfig,
+    IndicatorDDPGConfigError,
+)
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
 STATE, GOAL = "observation.state", "observation.goal_state"
@@ -90,7 +93,7 @@ def test_balance_fallback_next_uses_o_next_only_where_no_future_exists():
     assert torch.equal(relabel.branch, recorded.branch)  # same draws, only the fallback differs
     assert fractions(relabel.source[~has_future]) == pytest.approx([0.9, 0.0, 0.1], abs=0.02)
     assert torch.equal(relabel.source[has_future], recorded.source[has_future])
-    with pytest.raises(ValueError, match="balance_fallback"):
+    with pytest.raises(IndicatorDDPGConfigError, match="balance_fallback"):
         state_config(balance_fallback="future")
 
 

@@ -305,3 +305,21 @@ def _wandb_history(path: Path) -> dict:
             for item in record.history.item:
                 values[item.key or "/".join(item.nested_key)] = json.loads(item.value_json)
     return values
+
+
+def test_record_flags_parse(tmp_path):
+    import draccus
+
+    from lerobot_indicator.training.config import OnlineRecordConfig, OnlineTrainConfig
+
+    record = [
+        "--record.repo_id=local/x",
+        f"--record.root={tmp_path / 'ds'}",
+        "--record.push_to_hub=true",
+        "--record.checkpoint_every_s=5",
+    ]
+    cfg = draccus.parse(
+        OnlineTrainConfig, args=[*TINY, *ENVS["sawyer_reach"], f"--output_dir={tmp_path / 'run'}", *record]
+    )
+    cfg.validate()
+    assert cfg.record == OnlineRecordConfig("local/x", str(tmp_path / "ds"), True, 5.0)

@@ -89,8 +89,8 @@ def test_scripted_controller_reaches_95_percent_of_50_seeded_goals(state_env):
 
 def test_goal_is_reachable_and_matches_the_sampled_point(state_env):
     for seed in range(5):
-        state_env.reset(seed=seed)
-        assert np.linalg.norm(state_env._goal - state_env._goal_target) < 0.01
+        _, info = state_env.reset(seed=seed)
+        assert np.linalg.norm(info["gt_desired_goal"] - state_env._goal_target) < 0.01
 
 
 def test_goal_observation_equals_observation_at_goal_state(rgbd_env):

@@ -19,6 +19,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from lerobot_indicator.keys import GT_ACHIEVED_GOAL, GT_DESIRED_GOAL
+
 BUILTIN_POLICIES = ("random", "scripted", "noisy_scripted")
 
 
@@ -79,8 +81,8 @@ class ScriptedActions:
         if self.env_expert:
             action = np.asarray(self.vec_env.call("scripted_action"), dtype=np.float64)
         else:
-            error = np.asarray(info["gt_desired_goal"], np.float64) - np.asarray(
-                info["gt_achieved_goal"], np.float64
+            error = np.asarray(info[GT_DESIRED_GOAL], np.float64) - np.asarray(
+                info[GT_ACHIEVED_GOAL], np.float64
             )
             action = self.gain * error / self.steps
         if self.noise_std > 0:

@@ -14,17 +14,9 @@ import numpy as np
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 from lerobot.utils.feature_utils import hw_to_dataset_features
 
-from lerobot_indicator.keys import GT_PREFIX
+from lerobot_indicator.keys import DEPTH_SUFFIX, GT_INFO_KEYS, ground_truth_key
 
 REWARD, DONE = "next.reward", "next.done"
-GOAL_STATE = f"{OBS_STR}.goal_state"
-GT_INFO_KEYS = ("gt_achieved_goal", "gt_desired_goal", "gt_distance")
-DEPTH_SUFFIX = "_depth"
-
-
-def gt_key(info_key: str) -> str:
-    """``gt_distance -> observation.gt_distance``: named so nobody trains on it by accident."""
-    return f"{GT_PREFIX}{info_key.removeprefix('gt_')}"
 
 
 def observation_key(env_key: str) -> str:
@@ -75,7 +67,7 @@ def dataset_features(
     features.update(hw_to_dataset_features(cameras, OBS_STR, use_video=use_videos))
     for key in GT_INFO_KEYS:
         if key in info:
-            features[gt_key(key)] = _vector_feature(np.atleast_1d(np.asarray(info[key])).shape)
+            features[ground_truth_key(key)] = _vector_feature(np.atleast_1d(np.asarray(info[key])).shape)
     features[ACTION] = _vector_feature(action_space.shape)
     features[REWARD] = _vector_feature((1,))
     features[DONE] = {"dtype": "bool", "shape": (1,), "names": None}
@@ -100,7 +92,7 @@ def observation_frame(observation: Mapping, info: Mapping) -> dict[str, np.ndarr
             frame[observation_key(key)] = np.asarray(value, dtype=np.float32)
     for key in GT_INFO_KEYS:
         if key in info:
-            frame[gt_key(key)] = np.atleast_1d(np.asarray(info[key], dtype=np.float32))
+            frame[ground_truth_key(key)] = np.atleast_1d(np.asarray(info[key], dtype=np.float32))
     return frame
 
 

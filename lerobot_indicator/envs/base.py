@@ -1,9 +1,10 @@
 """Shared gymnasium base for goal-conditioned MuJoCo tasks with image goals (reach, rope push).
 
-What every task shares lives here: the observation dict of docs/conventions.md, RGB-D camera rendering,
-rendering the goal observation by putting the simulator in the goal configuration and restoring the
-exact state afterwards, seeding, and ``render()`` for eval videos. A task supplies the model, the episode
-sampling and the action.
+What every task shares lives here: ``reset()`` / ``step()``, the observation dict of docs/conventions.md,
+the ground-truth ``info``, RGB-D camera rendering, rendering the goal observation by putting the simulator
+in the goal configuration and restoring the exact state afterwards, seeding, and ``render()`` for eval
+videos. A task fills the hooks of :class:`MujocoGoalEnv`: the model, the episode's start and goal, the
+goal configuration, the action, and what its state and achieved goal are.
 
 Observation dict (``obs_type``: ``state`` | ``rgb`` | ``rgbd``):
     agent_pos            float32 (D,)      proprio (reach: end-effector xyz)
@@ -23,7 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.keys import GOAL_PREFIX
+from lerobot_indicator.keys import GOAL_PREFIX, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, GT_DISTANCE, depth_key
 
 OBS_TYPES = ("state", "rgb", "rgbd")
 # Evaluation-only env reward (training never uses it: the indicator reward comes from observations).
@@ -31,11 +32,6 @@ OBS_TYPES = ("state", "rgb", "rgbd")
 # "final_distance": 0, then -gt_distance at step episode_length, so lerobot-eval's avg_sum_reward is
 # minus the mean final distance to the goal.
 EVAL_REWARDS = ("success", "final_distance")
-DEPTH_SUFFIX = "_depth"
-
-
-def depth_obs_key(camera: str) -> str:
-    return f"{camera}{DEPTH_SUFFIX}"
 
 
 def _as(cls, value):
@@ -49,7 +45,22 @@ def _as(cls, value):
 
 
 class MujocoGoalEnv(gym.Env, abc.ABC):
-    """Goal-conditioned MuJoCo env whose goal observation is rendered from the goal configuration."""
+    """Goal-conditioned MuJoCo env whose goal observation is rendered from the goal configuration.
+
+    The base class runs the episode and a task fills the hooks, as robosuite's tasks fill
+    ``_load_model`` / ``_reset_internal``:
+
+    ``reset(seed, options)``: seed ``np_random``; ``_start_episode(options)`` (the task draws start and
+    goal and puts the simulator in the start configuration); ``_render_goal_observation()`` (enter the
+    goal configuration with ``_enter_goal_configuration()``, measure ``goal_state`` = ``_agent_state()``
+    and ``gt_desired_goal`` = ``_achieved_goal()`` there, render the goal images, restore the exact
+    state); return the observation and ``info``.
+
+    ``step(action)``: ``_apply_action(action)``; return the observation, the evaluation reward
+    (``EVAL_REWARDS``), never ``terminated`` (the time limit truncates) and ``info``: ``gt_achieved_goal`` =
+    ``_achieved_goal()``, ``gt_desired_goal``, ``gt_distance`` (their L2 distance) and ``is_success``
+    (``gt_distance <= epsilon``).
+    """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
     state_dim: int = 3
@@ -101,7 +112,11 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         self._state_buf = np.empty(mujoco.mj_stateSize(self.model, self._state_spec))
         self._renderer: RGBDRenderer | None = None
         self._renderer_cls = RGBDRenderer
+        # The goal, measured in the goal configuration (_measure_goal); a task's __init__ measures its
+        # initial configuration, so state observations and info are defined before the first reset.
         self._goal_obs: dict[str, np.ndarray] = {}
+        self._goal_state: np.ndarray | None = None
+        self._desired_goal: np.ndarray | None = None
 
         cam = self.camera_cfg
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
@@ -116,40 +131,54 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             depth = gym.spaces.Box(
                 0, np.iinfo(np.uint16).max, shape=(cam.height, cam.width, 1), dtype=np.uint16
             )
-            spaces[depth_obs_key(cam.name)] = depth
-            spaces[depth_obs_key(GOAL_PREFIX + cam.name)] = depth
+            spaces[depth_key(cam.name)] = depth
+            spaces[depth_key(GOAL_PREFIX + cam.name)] = depth
         self.observation_space = gym.spaces.Dict(spaces)
 
     # --- what a task provides -------------------------------------------------------------------
     @abc.abstractmethod
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        self._elapsed = 0
-
-    def _step_result(self, info: dict[str, Any]) -> tuple:
-        """``step()``'s return once the task has moved the sim: never terminates early (the time limit
-        truncates), and the reward is for evaluation only (``EVAL_REWARDS``)."""
-        self._elapsed += 1
-        if self.eval_reward == "final_distance":
-            reward = -float(info["gt_distance"]) if self._elapsed == self.episode_length else 0.0
-        else:
-            reward = 1.0 if info["is_success"] else -1.0
-        return self._get_obs(), reward, False, False, info
-
     def _build_model(self):
         """Compiled MjModel with a fixed camera named ``camera_cfg.name``."""
 
     @abc.abstractmethod
-    def _agent_state(self) -> np.ndarray:
-        """Proprio / achieved quantity of the current simulator state (float64)."""
-
-    @abc.abstractmethod
-    def _goal_state(self) -> np.ndarray:
-        """The same quantity in the goal configuration (float64)."""
+    def _start_episode(self, options: dict[str, Any]) -> None:
+        """Draw this episode's start and goal (from ``self.np_random`` and the reset ``options``) and put
+        the simulator in the start configuration."""
 
     @abc.abstractmethod
     def _enter_goal_configuration(self) -> None:
-        """Put the simulator in the goal configuration (the caller restores the state afterwards)."""
+        """Put the simulator in this episode's goal configuration (the caller restores the state)."""
+
+    @abc.abstractmethod
+    def _apply_action(self, action: np.ndarray) -> None:
+        """Move the simulator by one action."""
+
+    @abc.abstractmethod
+    def _agent_state(self) -> np.ndarray:
+        """``agent_pos`` of the current configuration (float64); ``goal_state`` is its value at the goal."""
+
+    @abc.abstractmethod
+    def _achieved_goal(self) -> np.ndarray:
+        """Ground-truth achieved goal of the current configuration (float64); ``gt_desired_goal`` is its
+        value at the goal."""
+
+    # --- gymnasium API ---------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        self._elapsed = 0
+        self._start_episode(options or {})
+        self._render_goal_observation()
+        return self._get_obs(), self._info()
+
+    def step(self, action):
+        self._apply_action(action)
+        self._elapsed += 1
+        info = self._info()
+        if self.eval_reward == "final_distance":
+            reward = -float(info[GT_DISTANCE]) if self._elapsed == self.episode_length else 0.0
+        else:
+            reward = 1.0 if info["is_success"] else -1.0
+        return self._get_obs(), reward, False, False, info
 
     # --- shared machinery ------------------------------------------------------------------------
     @property
@@ -178,20 +207,27 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             from lerobot_indicator.envs.rendering import metres_to_uint16_mm
 
             mm = metres_to_uint16_mm(depth_m, cam.depth_min_m, cam.depth_max_m)
-            out[depth_obs_key(prefix + cam.name)] = mm[..., None]
+            out[depth_key(prefix + cam.name)] = mm[..., None]
         return out
 
     def _render_goal_observation(self) -> None:
-        """Render the goal camera images in the goal configuration, then restore the exact state."""
+        """In the goal configuration, measure the goal (``goal_state``, ``gt_desired_goal``) and render the
+        goal camera images; then restore the exact simulator state."""
         state = self.save_state()
         self._enter_goal_configuration()
+        self._measure_goal()
         self._goal_obs = self._camera_obs(prefix=GOAL_PREFIX)
         self.restore_state(state)
+
+    def _measure_goal(self) -> None:
+        """Take the current configuration as the goal's: ``goal_state`` and ``gt_desired_goal``."""
+        self._goal_state = self._agent_state()
+        self._desired_goal = self._achieved_goal()
 
     def _get_obs(self) -> dict[str, Any]:
         obs: dict[str, Any] = {
             "agent_pos": self._agent_state().astype(np.float32),
-            "goal_state": self._goal_state().astype(np.float32),
+            "goal_state": self._goal_state.astype(np.float32),
         }
         if self.obs_type == "state":
             return obs
@@ -199,9 +235,19 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         cam, goal_cam = self.camera_cfg.name, GOAL_PREFIX + self.camera_cfg.name
         obs["pixels"] = {cam: current[cam], goal_cam: self._goal_obs[goal_cam].copy()}
         if self.obs_type == "rgbd":
-            obs[depth_obs_key(cam)] = current[depth_obs_key(cam)]
-            obs[depth_obs_key(goal_cam)] = self._goal_obs[depth_obs_key(goal_cam)].copy()
+            obs[depth_key(cam)] = current[depth_key(cam)]
+            obs[depth_key(goal_cam)] = self._goal_obs[depth_key(goal_cam)].copy()
         return obs
+
+    def _info(self) -> dict[str, Any]:
+        achieved = self._achieved_goal()
+        distance = float(np.linalg.norm(achieved - self._desired_goal))
+        return {
+            GT_ACHIEVED_GOAL: achieved.astype(np.float32),
+            GT_DESIRED_GOAL: self._desired_goal.astype(np.float32),
+            GT_DISTANCE: np.float32(distance),
+            "is_success": bool(distance <= self.epsilon),
+        }
 
     def render(self) -> np.ndarray:
         """HxWx3 uint8 frame of the task camera (eval videos)."""

@@ -14,9 +14,9 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.processor import PolicyProcessorPipeline
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
-from lerobot_indicator.envs.base import DEPTH_SUFFIX, EVAL_REWARDS, OBS_TYPES
+from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.keys import GOAL_PREFIX, goal_key
+from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
 
 GYM_NAMESPACE = "lerobot_indicator"
 SAWYER_REACH_TASK = "SawyerReach-v0"
@@ -34,7 +34,8 @@ class SawyerGoalEnvConfig(EnvConfig):
     # the last step, 0 before: lerobot-eval's avg_sum_reward is then minus the mean final distance).
     eval_reward: str = "success"
     render_mode: str = "rgb_array"
-    # Draw the robot with its primitive collision shapes for the camera (~10x faster in software GL).
+    # Draw the robot with its primitive collision shapes for the camera: far fewer triangles than robosuite's
+    # meshes for software GL to rasterise (docs/envs.md, docs/results/reach_env_speed.json).
     light_render: bool = True
     camera: GoalCameraConfig = field(default_factory=GoalCameraConfig)
     end_effector: EndEffectorConfig = field(default_factory=EndEffectorConfig)
@@ -78,7 +79,7 @@ class SawyerGoalEnvConfig(EnvConfig):
         """Env observation keys of the depth maps (``front_depth``, ``goal_front_depth``)."""
         if self.obs_type != "rgbd":
             return []
-        return [f"{self.camera.name}{DEPTH_SUFFIX}", f"{GOAL_PREFIX}{self.camera.name}{DEPTH_SUFFIX}"]
+        return [depth_key(self.camera.name), depth_key(GOAL_PREFIX + self.camera.name)]
 
     @property
     def package_name(self) -> str:

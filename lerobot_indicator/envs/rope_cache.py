@@ -191,7 +191,7 @@ def generate_cache(
     elif jobs:
         import multiprocessing as mp
 
-        # fork: workers inherit the imported modules (spawn re-imports torch/LeRobot, ~10 s per worker);
+        # fork: workers inherit the imported modules (spawn would re-import torch/LeRobot in every worker);
         # generation uses no GL context, so forking is safe.
         method = "fork" if "fork" in mp.get_all_start_methods() else "spawn"
         with mp.get_context(method).Pool(

@@ -8,7 +8,7 @@ Start: straight rope plus one random push; goal: ``goal_pushes`` (2) more random
 policy. Pairs come from a cache file (``cache_path``, see :mod:`lerobot_indicator.envs.rope_cache`) or
 are generated on the fly. The pusher is parked outside the camera's view between pushes, so the camera
 and goal images show the table and the rope only; the goal image is rendered by putting the simulator
-in the goal configuration, rendering, and restoring the exact state (shared base).
+in the goal configuration, rendering, and restoring the exact state (:class:`MujocoGoalEnv`).
 
 Observations (besides the shared camera keys): ``agent_pos`` = the 15 link centres xyz (45),
 ``goal_state`` = the same in the goal configuration (45), ``rope_xy`` = link centres xy (30) and its goal
@@ -31,9 +31,11 @@ from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.rope_cache import cache_params, generate_pair, load_cache
 from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model
 from lerobot_indicator.envs.rope_sim import PushConfig, RopeSim
+from lerobot_indicator.keys import GOAL_PREFIX
 
 TASK_DESCRIPTION = "Push the rope into the configuration shown in the goal image."
 TABLE_TOP_Z = RopeGeometry().table_top_z
+ROPE_XY = "rope_xy"  # env key of the link xy positions; its goal is GOAL_PREFIX + ROPE_XY
 
 
 def rope_camera_defaults() -> dict:
@@ -69,7 +71,7 @@ def push_config_for(end_effector: EndEffectorConfig, goal_pushes: int = 2) -> Pu
 
 
 class RopePushEnv(MujocoGoalEnv):
-    """See module docstring."""
+    """See module docstring. ``reset(options={"cache_index": i})`` picks cached pair i (needs ``cache_path``)."""
 
     task = "rope_push"
     task_description = TASK_DESCRIPTION
@@ -99,14 +101,14 @@ class RopePushEnv(MujocoGoalEnv):
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(4,), dtype=np.float32)
         xy = gym.spaces.Box(-np.inf, np.inf, shape=(2 * n,), dtype=np.float32)
         self.observation_space = gym.spaces.Dict(
-            {**self.observation_space.spaces, "rope_xy": xy, "goal_rope_xy": xy}
+            {**self.observation_space.spaces, ROPE_XY: xy, GOAL_PREFIX + ROPE_XY: xy}
         )
         self.cache = None
         if cache_path is not None:
             self.cache = load_cache(cache_path, expected=cache_params(self.push_config, self.model.nq))
         self._goal_qpos = self.data.qpos.copy()
-        self._goal_links = self.sim.link_positions()
         self._goal_actions = np.zeros((0, 4))
+        self._measure_goal()
 
     def _build_model(self):
         cam = self.camera_cfg
@@ -117,11 +119,29 @@ class RopePushEnv(MujocoGoalEnv):
     def _agent_state(self) -> np.ndarray:
         return self.sim.link_positions().reshape(-1)
 
-    def _goal_state(self) -> np.ndarray:
-        return self._goal_links.reshape(-1)
+    def _achieved_goal(self) -> np.ndarray:
+        return self.sim.link_positions()[:, :2].reshape(-1)
+
+    def _start_episode(self, options: dict[str, Any]) -> None:
+        if self.cache is not None:
+            n = len(self.cache["start_qpos"])
+            i = options.get("cache_index")
+            i = int(self.np_random.integers(n)) if i is None else int(i)
+            if not 0 <= i < n:
+                raise ValueError(f"reset option cache_index={i} out of range [0, {n})")
+            pair = {k: self.cache[k][i] for k in ("start_qpos", "goal_qpos", "goal_actions")}
+        elif options.get("cache_index") is not None:
+            raise ValueError("reset option cache_index needs an env made with cache_path")
+        else:
+            pair = generate_pair(self.sim, self.np_random, self.epsilon)
+        self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
+        self.sim.set_qpos(pair["start_qpos"])
 
     def _enter_goal_configuration(self) -> None:
         self.sim.set_qpos(self._goal_qpos)
+
+    def _apply_action(self, action) -> None:
+        self.sim.push(np.asarray(action, dtype=np.float64).reshape(-1))
 
     @property
     def goal_push_actions(self) -> np.ndarray:
@@ -135,47 +155,8 @@ class RopePushEnv(MujocoGoalEnv):
             return self._goal_actions[self._elapsed].astype(np.float32)
         return np.zeros(4, dtype=np.float32)
 
-    # --- gymnasium API --------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """``options``: ``cache_index`` picks a cached pair (needs ``cache_path``)."""
-        super().reset(seed=seed)
-        options = options or {}
-        if self.cache is not None:
-            n = len(self.cache["start_qpos"])
-            i = options.get("cache_index")
-            i = int(self.np_random.integers(n)) if i is None else int(i)
-            if not 0 <= i < n:
-                raise ValueError(f"reset option cache_index={i} out of range [0, {n})")
-            pair = {k: self.cache[k][i] for k in ("start_qpos", "goal_qpos", "goal_actions")}
-        elif options.get("cache_index") is not None:
-            raise ValueError("reset option cache_index needs an env made with cache_path")
-        else:
-            pair = generate_pair(self.sim, self.np_random, self.epsilon)
-        self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
-        self.sim.set_qpos(self._goal_qpos)
-        self._goal_links = self.sim.link_positions()
-        if self.obs_type != "state":
-            self._goal_obs = self._camera_obs(prefix="goal_")
-        self.sim.set_qpos(pair["start_qpos"])
-        return self._get_obs(), self._info()
-
-    def step(self, action):
-        self.sim.push(np.asarray(action, dtype=np.float64).reshape(-1))
-        return self._step_result(self._info())
-
     def _get_obs(self) -> dict[str, Any]:
         obs = super()._get_obs()
-        obs["rope_xy"] = self.sim.link_positions()[:, :2].reshape(-1).astype(np.float32)
-        obs["goal_rope_xy"] = self._goal_links[:, :2].reshape(-1).astype(np.float32)
+        obs[ROPE_XY] = self._achieved_goal().astype(np.float32)
+        obs[GOAL_PREFIX + ROPE_XY] = self._desired_goal.astype(np.float32)
         return obs
-
-    def _info(self) -> dict[str, Any]:
-        achieved = self.sim.link_positions()[:, :2].reshape(-1)
-        desired = self._goal_links[:, :2].reshape(-1)
-        distance = float(np.linalg.norm(achieved - desired))
-        return {
-            "gt_achieved_goal": achieved.astype(np.float32),
-            "gt_desired_goal": desired.astype(np.float32),
-            "gt_distance": np.float32(distance),
-            "is_success": bool(distance <= self.epsilon),
-        }

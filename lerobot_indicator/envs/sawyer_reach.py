@@ -16,14 +16,16 @@ import numpy as np
 
 from lerobot_indicator.envs.base import MujocoGoalEnv
 from lerobot_indicator.envs.models import EE_SITE, MOCAP_BODY, SceneSpec, build_sawyer_table_model, home_qpos
-from lerobot_indicator.keys import GOAL_PREFIX
 
 TASK_DESCRIPTION = "Move the Sawyer's gripper to where it is in the goal image."
 SETTLE_S = 0.15  # simulated time to bring the arm from home to a start / goal point (mean 1 mm error)
 
 
 class SawyerReachEnv(MujocoGoalEnv):
-    """See module docstring. ``info``: gt_achieved_goal, gt_desired_goal, gt_distance, is_success."""
+    """See module docstring. ``agent_pos`` and ``gt_achieved_goal`` are the end-effector xyz.
+
+    ``reset(options=...)`` may fix ``start_pos`` and/or ``goal_pos`` (xyz inside the bounds; tests, scripts).
+    """
 
     task = "sawyer_reach"
     task_description = TASK_DESCRIPTION
@@ -47,8 +49,8 @@ class SawyerReachEnv(MujocoGoalEnv):
         mj.mju_mat2Quat(self.data.mocap_quat[self._mocap], self.data.site_xmat[self._site])
         self.data.mocap_pos[self._mocap] = self.data.site_xpos[self._site]
         self._home_state = self.save_state()
-        self._goal = self.data.site_xpos[self._site].copy()
-        self._goal_target = self._goal.copy()
+        self._goal_target = self.data.site_xpos[self._site].copy()  # the sampled goal point (reset)
+        self._measure_goal()
 
     def _build_model(self):
         cam = self.camera_cfg
@@ -58,12 +60,43 @@ class SawyerReachEnv(MujocoGoalEnv):
         )
         return build_sawyer_table_model(spec)
 
-    # --- task hooks -----------------------------------------------------------------------------
+    # --- task hooks (MujocoGoalEnv) -----------------------------------------------------------
     def _agent_state(self) -> np.ndarray:
         return self.data.site_xpos[self._site].copy()
 
-    def _goal_state(self) -> np.ndarray:
-        return self._goal
+    def _achieved_goal(self) -> np.ndarray:
+        return self._agent_state()
+
+    def _start_episode(self, options: dict[str, Any]) -> None:
+        goal = self._point_option(options, "goal_pos")
+        start = self._point_option(options, "start_pos")
+        if goal is None:
+            goal = self.np_random.uniform(self._low, self._high)
+        if start is None:
+            start = self.np_random.uniform(self._low, self._high)
+            while np.linalg.norm(start - goal) <= self.epsilon:  # no episode starts solved
+                start = self.np_random.uniform(self._low, self._high)
+        self._goal_target = goal
+        self._settle_at(start)
+
+    def _enter_goal_configuration(self) -> None:
+        # The goal is where the gripper settles, so goal_state is exactly what agent_pos reads there.
+        self._settle_at(self._goal_target)
+
+    def _apply_action(self, action) -> None:
+        action = np.clip(np.asarray(action, dtype=np.float64).reshape(3), -1.0, 1.0)
+        target = np.clip(self.data.site_xpos[self._site] + action * self._steps, self._low, self._high)
+        self._glide_mocap(target, self.n_substeps)
+        self._mj.mj_forward(self.model, self.data)  # derived quantities = f(state), as after a restore
+
+    # --- helpers ------------------------------------------------------------------------------
+    def _point_option(self, options: dict[str, Any], key: str) -> np.ndarray | None:
+        if options.get(key) is None:
+            return None
+        point = np.asarray(options[key], dtype=np.float64)
+        if point.shape != (3,) or np.any(point < self._low) or np.any(point > self._high):
+            raise ValueError(f"reset option {key}={options[key]} must be xyz inside end_effector_bounds")
+        return point
 
     def _settle_at(self, ee_pos: np.ndarray) -> None:
         """Home posture, mocap at ``ee_pos``, settle: one deterministic configuration per point."""
@@ -86,53 +119,3 @@ class SawyerReachEnv(MujocoGoalEnv):
             self._mj.mj_step(self.model, self.data)
         if n_substeps > n_ramp:
             self._mj.mj_step(self.model, self.data, n_substeps - n_ramp)
-
-    def _enter_goal_configuration(self) -> None:
-        self._settle_at(self._goal_target)
-
-    # --- gymnasium API --------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """``options`` may fix ``start_pos`` and/or ``goal_pos`` (xyz inside the bounds; tests, scripts)."""
-        super().reset(seed=seed)
-        options = options or {}
-        goal = self._point_option(options, "goal_pos")
-        start = self._point_option(options, "start_pos")
-        if goal is None:
-            goal = self.np_random.uniform(self._low, self._high)
-        if start is None:
-            start = self.np_random.uniform(self._low, self._high)
-            while np.linalg.norm(start - goal) <= self.epsilon:  # no episode starts solved
-                start = self.np_random.uniform(self._low, self._high)
-        self._goal_target = goal
-        # The goal is where the gripper settles, so goal_state is exactly what agent_pos reads there.
-        self._settle_at(goal)
-        self._goal = self._agent_state()
-        if self.obs_type != "state":
-            self._goal_obs = self._camera_obs(prefix=GOAL_PREFIX)
-        self._settle_at(start)
-        return self._get_obs(), self._info()
-
-    def _point_option(self, options: dict[str, Any], key: str) -> np.ndarray | None:
-        if options.get(key) is None:
-            return None
-        point = np.asarray(options[key], dtype=np.float64)
-        if point.shape != (3,) or np.any(point < self._low) or np.any(point > self._high):
-            raise ValueError(f"reset option {key}={options[key]} must be xyz inside end_effector_bounds")
-        return point
-
-    def step(self, action):
-        action = np.clip(np.asarray(action, dtype=np.float64).reshape(3), -1.0, 1.0)
-        target = np.clip(self.data.site_xpos[self._site] + action * self._steps, self._low, self._high)
-        self._glide_mocap(target, self.n_substeps)
-        self._mj.mj_forward(self.model, self.data)  # derived quantities = f(state), as after a restore
-        return self._step_result(self._info())
-
-    def _info(self) -> dict[str, Any]:
-        achieved = self._agent_state()
-        distance = float(np.linalg.norm(achieved - self._goal))
-        return {
-            "gt_achieved_goal": achieved.astype(np.float32),
-            "gt_desired_goal": self._goal.astype(np.float32),
-            "gt_distance": np.float32(distance),
-            "is_success": bool(distance <= self.epsilon),
-        }

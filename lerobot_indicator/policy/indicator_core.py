@@ -26,20 +26,20 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from lerobot_indicator.keys import goal_key
+from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, tanh
 
+# Transition-batch keys (the table above).
 ACTION = "action"
 NEXT = "next."
 FUTURE = "future."
-HAS_FUTURE = "future.valid"
-FUTURE_COUNT = "future.count"
-NEXT_VALID = "next.valid"
-GT_ACHIEVED = "observation.gt_achieved_goal"
-GT_DESIRED = "observation.gt_desired_goal"
-GT_NEXT_ACHIEVED = NEXT + GT_ACHIEVED
-GT_FUTURE_ACHIEVED = FUTURE + GT_ACHIEVED
+HAS_FUTURE = FUTURE + "valid"
+FUTURE_COUNT = FUTURE + "count"
+NEXT_VALID = NEXT + "valid"
+GT_NEXT_ACHIEVED = NEXT + OBS_GT_ACHIEVED_GOAL
+GT_FUTURE_ACHIEVED = FUTURE + OBS_GT_ACHIEVED_GOAL
+GT_DESIRED = OBS_GT_DESIRED_GOAL  # the recorded goal's ground truth: o_t's own key, no prefix
 
 # Relabel branches / goal sources.
 SOURCE_NEXT, SOURCE_FUTURE, SOURCE_RECORDED = 0, 1, 2
@@ -386,10 +386,10 @@ def dataset_batch_to_transitions(
         out[NEXT + k] = batch[k][:, 1]
         out[FUTURE + k] = batch[k][rows, pick]
         out[goal_key(k)] = batch[goal_key(k)][:, 0]
-    if GT_ACHIEVED in batch and GT_DESIRED in batch:
-        out[GT_NEXT_ACHIEVED] = batch[GT_ACHIEVED][:, 1]
-        out[GT_FUTURE_ACHIEVED] = batch[GT_ACHIEVED][rows, pick]
-        out[GT_DESIRED] = batch[GT_DESIRED][:, 0]
+    if OBS_GT_ACHIEVED_GOAL in batch and OBS_GT_DESIRED_GOAL in batch:
+        out[GT_NEXT_ACHIEVED] = batch[OBS_GT_ACHIEVED_GOAL][:, 1]
+        out[GT_FUTURE_ACHIEVED] = batch[OBS_GT_ACHIEVED_GOAL][rows, pick]
+        out[GT_DESIRED] = batch[OBS_GT_DESIRED_GOAL][:, 0]
     return out
 
 

@@ -37,15 +37,16 @@ class OnlineConfig:
     eval_episodes: int = 20
     # Input normalisation of a policy trained from scratch: "running" = mean/std of every episode in the
     # replay buffer (frames and goals), refreshed each cycle, as baselines' HER; "first_cycle" = frozen
-    # after the first cycle (earlier default: its narrow stats clipped goals outside the first episodes'
-    # range, docs/results/README.md). A --policy.path policy keeps its own stats either way.
+    # after the first cycle (a few episodes' narrow stats clip goals outside their range, so the networks
+    # cannot tell those goals apart: docs/results/README.md). A --policy.path policy keeps its own stats.
     input_stats: str = "running"
 
 
 @dataclass
-class RecordConfig:
-    """Write every collected (behaviour-policy) episode to a LeRobotDataset, in the recorder's format
-    (docs/dataset_format.md, lossless images). None repo_id = don't."""
+class OnlineRecordConfig:
+    """``--record.*``: write every collected (behaviour-policy) episode to a LeRobotDataset, in the format of
+    ``lerobot_indicator.data.recorder`` (docs/dataset_format.md, lossless images). None repo_id = don't.
+    The trainer builds the recorder's own ``RecordConfig`` from these fields."""
 
     repo_id: str | None = None
     root: str | None = None
@@ -62,7 +63,7 @@ class OnlineTrainConfig(HubMixin):
     # Optional offline data: seeds the replay buffer before online collection.
     dataset: DatasetConfig | None = None
     online: OnlineConfig = field(default_factory=OnlineConfig)
-    record: RecordConfig = field(default_factory=RecordConfig)
+    record: OnlineRecordConfig = field(default_factory=OnlineRecordConfig)
     output_dir: Path | None = None
     job_name: str | None = None
     resume: bool = False

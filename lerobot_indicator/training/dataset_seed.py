@@ -18,9 +18,13 @@ from lerobot.datasets import LeRobotDataset
 from tqdm import tqdm
 
 from lerobot_indicator.finite import check_episode
+from lerobot_indicator.keys import (
+    GT_ACHIEVED_GOAL,
+    GT_DESIRED_GOAL,
+    OBS_GT_ACHIEVED_GOAL,
+    OBS_GT_DESIRED_GOAL,
+)
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
-
-GT_ACHIEVED, GT_DESIRED = "observation.gt_achieved_goal", "observation.gt_desired_goal"
 
 
 def load_dataset(cfg: DatasetConfig) -> LeRobotDataset:
@@ -41,7 +45,7 @@ def dataset_episodes(dataset: LeRobotDataset, keys: list[str], horizon: int) -> 
         raise KeyError(
             f"dataset {dataset.repo_id} lacks the policy's keys {missing}; it has {sorted(dataset.features)}"
         )
-    has_gt = GT_ACHIEVED in dataset.features and GT_DESIRED in dataset.features
+    has_gt = OBS_GT_ACHIEVED_GOAL in dataset.features and OBS_GT_DESIRED_GOAL in dataset.features
     episode_index = np.asarray(dataset.hf_dataset["episode_index"])
     for ep in np.unique(episode_index):
         rows = np.flatnonzero(episode_index == ep)
@@ -59,7 +63,10 @@ def dataset_episodes(dataset: LeRobotDataset, keys: list[str], horizon: int) -> 
         check_episode({**obs, "action": stack("action")}, int(ep), f"dataset {dataset.repo_id}")
         gt = None
         if has_gt:
-            gt = {"gt_achieved_goal": stack(GT_ACHIEVED), "gt_desired_goal": stack(GT_DESIRED)[0]}
+            gt = {
+                GT_ACHIEVED_GOAL: stack(OBS_GT_ACHIEVED_GOAL),
+                GT_DESIRED_GOAL: stack(OBS_GT_DESIRED_GOAL)[0],
+            }
         yield obs, stack("action")[:horizon], gt
 
 

@@ -34,6 +34,7 @@ from tqdm import tqdm
 
 from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
 from lerobot_indicator.finite import NonFiniteError, check_module
+from lerobot_indicator.keys import EVAL_SEED_OFFSET
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
@@ -44,7 +45,6 @@ from lerobot_indicator.training.rollout import Processors, Rollouts, run_episode
 METRICS_FILE = "metrics.jsonl"
 RESUME_DIR = "resume"
 REPLAY_DIR = "replay"
-EVAL_SEED_OFFSET = 10**9  # evaluation episodes never share seeds with training episodes
 
 
 @dataclass

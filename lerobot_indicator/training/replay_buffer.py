@@ -22,7 +22,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from lerobot_indicator.keys import goal_key, is_goal_key
+from lerobot_indicator.keys import GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, goal_key, is_goal_key
 
 Arrays = dict[str, np.ndarray]
 _PACKINGS = ((np.uint8, 255.0), (np.uint16, 1.0))
@@ -115,8 +115,8 @@ class EpisodeReplayBuffer:
                 self.moments[key] = np.zeros((cap, 3, value.shape[1]), dtype=np.float64)
         self.actions = np.zeros((cap, T, actions.shape[-1]), dtype=np.float32)
         if gt is not None:
-            self.gt_achieved = np.zeros((cap, T + 1, gt["gt_achieved_goal"].shape[-1]), dtype=np.float32)
-            self.gt_desired = np.zeros((cap, gt["gt_desired_goal"].shape[-1]), dtype=np.float32)
+            self.gt_achieved = np.zeros((cap, T + 1, gt[GT_ACHIEVED_GOAL].shape[-1]), dtype=np.float32)
+            self.gt_desired = np.zeros((cap, gt[GT_DESIRED_GOAL].shape[-1]), dtype=np.float32)
 
     def add_episode(
         self, observations: Arrays, actions: np.ndarray, ground_truth: Mapping | None = None
@@ -159,8 +159,8 @@ class EpisodeReplayBuffer:
                 )
         self.actions[slot] = actions
         if ground_truth is not None:
-            self.gt_achieved[slot] = ground_truth["gt_achieved_goal"]
-            self.gt_desired[slot] = ground_truth["gt_desired_goal"]
+            self.gt_achieved[slot] = ground_truth[GT_ACHIEVED_GOAL]
+            self.gt_desired[slot] = ground_truth[GT_DESIRED_GOAL]
         self.next_slot = (slot + 1) % self.capacity
         self.num_episodes = min(self.num_episodes + 1, self.capacity)
         self.total_episodes_added += 1

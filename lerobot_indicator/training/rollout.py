@@ -17,9 +17,7 @@ from lerobot.envs.utils import preprocess_observation
 from lerobot.utils.constants import ACTION
 
 from lerobot_indicator.data.features import observation_frame, unbatch
-from lerobot_indicator.keys import goal_key
-
-GT_ACHIEVED, GT_DESIRED, GT_DISTANCE = "gt_achieved_goal", "gt_desired_goal", "gt_distance"
+from lerobot_indicator.keys import GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, GT_DISTANCE, goal_key
 
 
 @dataclass
@@ -50,7 +48,7 @@ class Rollouts:
         for i in range(self.actions.shape[0]):
             gt = None
             if self.gt_achieved is not None:
-                gt = {GT_ACHIEVED: self.gt_achieved[i], GT_DESIRED: self.gt_desired[i]}
+                gt = {GT_ACHIEVED_GOAL: self.gt_achieved[i], GT_DESIRED_GOAL: self.gt_desired[i]}
             yield {k: v[i] for k, v in self.observations.items()}, self.actions[i], gt
 
 
@@ -107,7 +105,7 @@ def run_episodes(
     obs, info = vec_env.reset(seed=seeds)
     frames: list[dict[str, np.ndarray]] = []
     actions, achieved = [], []
-    desired = _info_array(info, GT_DESIRED)
+    desired = _info_array(info, GT_DESIRED_GOAL)
     n_envs = vec_env.num_envs
     dataset_frames = [[] for _ in range(n_envs)] if keep_dataset_frames else None
 
@@ -118,7 +116,7 @@ def run_episodes(
     for t in range(horizon):
         batch = env_batch(obs, vec_env, processors.env_pre)
         frames.append({k: batch[k].cpu().numpy() for k in keys})
-        achieved.append(_info_array(info, GT_ACHIEVED))
+        achieved.append(_info_array(info, GT_ACHIEVED_GOAL))
         keep_frames(obs, info)
         policy_batch = processors.pre(batch)
         if explore:
@@ -148,7 +146,7 @@ def run_episodes(
     batch = env_batch(final_obs, vec_env, processors.env_pre)
     frames.append({k: batch[k].cpu().numpy() for k in keys})
     keep_frames(final_obs, final_info)
-    achieved.append(_info_array(final_info, GT_ACHIEVED))
+    achieved.append(_info_array(final_info, GT_ACHIEVED_GOAL))
     distance = _info_array(final_info, GT_DISTANCE)
     success = np.asarray(final_info.get("is_success", np.zeros(len(seeds), bool)), dtype=bool)
     has_gt = desired is not None and all(a is not None for a in achieved)

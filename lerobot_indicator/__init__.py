@@ -2,3 +2,4 @@
 
 import lerobot_indicator.envs  # noqa: F401  (registers the sawyer_reach env type and gymnasium ids)
 import lerobot_indicator.policy  # noqa: F401  (registers the indicator_ddpg policy type)
+import lerobot_indicator.quiet_logs  # noqa: F401  (torchcodec's FFmpeg fallback in one line)

@@ -240,7 +240,10 @@ def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoi
         text=True,
         env={**_env(), "KILL_AT": kill_at},
     )
-    assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr, proc.stderr[-2000:]
+    assert proc.returncode == 130, proc.stderr[-2000:]
+    last_lines = proc.stderr.strip().splitlines()[-1]
+    assert "interrupted: the run continues from its resume/ state" in last_lines, proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr
     _train(tmp_path / "split", *record_args("split"), "--steps=15", "--resume=true")
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     full, split_ds = (

@@ -7,7 +7,9 @@ reward, and software GL is deterministic, so the same simulator state always ren
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import weakref
 
 import numpy as np
 
@@ -22,6 +24,18 @@ def metres_to_uint16_mm(depth_m: np.ndarray, depth_min_m: float, depth_max_m: fl
     valid = (depth_m >= depth_min_m) & (depth_m <= depth_max_m)
     mm = np.rint(np.where(valid, depth_m, 0.0) * MM_PER_M)
     return np.clip(mm, 0, UINT16_MAX).astype(np.uint16)
+
+
+# Renderers still open at interpreter exit are closed by ``atexit`` while EGL is still up; left to the garbage
+# collector, mujoco's GLContext.__del__ prints a traceback during shutdown. The hook is registered after the
+# first GL context exists, so it runs before mujoco's own exit hook (eglTerminate; atexit runs last-in first).
+_OPEN: weakref.WeakSet[RGBDRenderer] = weakref.WeakSet()
+
+
+def _close_open_renderers() -> None:
+    for renderer in list(_OPEN):
+        with contextlib.suppress(Exception):
+            renderer.close()
 
 
 class RGBDRenderer:
@@ -55,6 +69,10 @@ class RGBDRenderer:
         extent = model.stat.extent
         self._near = model.vis.map.znear * extent
         self._far = model.vis.map.zfar * extent
+        if not _OPEN:
+            atexit.unregister(_close_open_renderers)
+            atexit.register(_close_open_renderers)
+        _OPEN.add(self)
 
     def render(self, data, camera: str, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """(RGB uint8 HxWx3, depth in metres float32 HxW or None) for ``camera`` at ``data``'s state."""
@@ -80,5 +98,8 @@ class RGBDRenderer:
             self._gl = None
 
     def __del__(self):
-        with contextlib.suppress(Exception):  # interpreter shutdown: GL may already be gone
+        # No contextlib here: at interpreter shutdown module globals may already be None.
+        try:  # noqa: SIM105
             self.close()
+        except Exception:  # GL may already be gone
+            pass

@@ -661,12 +661,6 @@ def test_rows_equal_compares_bit_patterns(dtype):
         core.rows_equal(a, b[:, :1])
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG indicator_core.rows_equal: b.to(a.dtype) casts the second argument to the first's dtype, so "
-    "float32(0.1) vs float64(0.1) is equal in one order and unequal in the other; int 0 vs float -0.0 "
-    "likewise (the int path compares values, the float path bits)",
-)
 @pytest.mark.parametrize(
     "a, b",
     [
@@ -681,19 +675,12 @@ def test_rows_equal_does_not_depend_on_argument_order_across_dtypes(a, b):
 
 
 def test_rows_equal_same_dtype_is_symmetric():
-    """Within one dtype the answer is the same in both orders (the passing half of the test above)."""
+    """Within one dtype the answer is the same in both orders."""
     a = torch.tensor([[0.1, -0.0], [0.1, 0.0]])
     b = torch.tensor([[0.1, 0.0], [0.1, 0.0]])
     assert core.rows_equal(a, b).tolist() == core.rows_equal(b, a).tolist() == [False, True]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="BUG replay_buffer/online: obs and goal keys are packed (and widened) independently; with "
-    "sample(packed=True) (what OnlineTrainer uses) a widened float32 o_{t+1} meets a still-uint8 goal, "
-    "rows_equal casts uint8 k to float k (not k/255) and select_goals' torch.where promotes the recorded "
-    "goal to k: a reached recorded goal gets R- and the networks see it 255x too large",
-)
 def test_packed_replay_recorded_goal_reached_gets_r_plus():
     """An episode whose recorded goal is o_{T-1} (values k/255, packed as uint8): the transition t = T-2
     reaches it, so r = R+ and the goal the networks see is o_{T-1}'s float value, also after a later

@@ -105,9 +105,11 @@ def rows_equal(a: Tensor, b: Tensor) -> Tensor:
     """Per-row bit-for-bit equality (floats compared by their bit patterns: -0.0 != 0.0, NaN == same NaN)."""
     if a.shape != b.shape:
         raise ValueError(f"cannot compare observations of shapes {tuple(a.shape)} and {tuple(b.shape)}")
-    if a.dtype.is_floating_point:
+    dtype = torch.promote_types(a.dtype, b.dtype)  # the same answer in either argument order
+    a, b = a.to(dtype), b.to(dtype)
+    if dtype.is_floating_point:
         int_type = {2: torch.int16, 4: torch.int32, 8: torch.int64}[a.element_size()]
-        a, b = a.contiguous().view(int_type), b.to(a.dtype).contiguous().view(int_type)
+        a, b = a.contiguous().view(int_type), b.contiguous().view(int_type)
     return (a == b).flatten(1).all(dim=1)
 
 

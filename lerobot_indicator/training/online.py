@@ -34,8 +34,9 @@ from tqdm import tqdm
 
 from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
 from lerobot_indicator.finite import NonFiniteError, check_module
-from lerobot_indicator.keys import EVAL_SEED_OFFSET
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
 from lerobot_indicator.policy import indicator_core as core
+from lerobot_indicator.policy.networks_indicator_ddpg import as_float
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
 from lerobot_indicator.training.plots import plot_learning_curve
@@ -94,6 +95,12 @@ def to_transition_batch(
         batch[core.FUTURE + k] = t(sample["future_obs"][k])
     for k in (k for k in sample["obs"] if k not in batch):
         batch[k] = t(sample["obs"][k])  # the recorded goals
+    for k in keys:
+        # The buffer packs an observation key and its goal key separately: where one was widened to float32
+        # and the other is still uint8, compare and encode both as their float32 values.
+        group = [k, core.NEXT + k, core.FUTURE + k, goal_key(k)]
+        if len({batch[g].dtype for g in group}) > 1:
+            batch.update({g: as_float(batch[g]) for g in group})
     if "gt_next_achieved" in sample:
         batch[core.GT_NEXT_ACHIEVED] = t(sample["gt_next_achieved"])
         batch[core.GT_FUTURE_ACHIEVED] = t(sample["gt_future_achieved"])
@@ -361,71 +368,77 @@ class OnlineTrainer:
         self._record_checkpoint_t = -math.inf  # the first cycle always leaves a resume state
         last_eval: dict[str, float] = {}
         bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
-        while self.progress.cycle < self.n_cycles:
-            t0, cycle = time.perf_counter(), self.progress.cycle
-            generator = torch.Generator().manual_seed(cycle_seed(cfg.seed, cycle))
-            torch.manual_seed(cycle_seed(cfg.seed, cycle))  # image augmentation draws from the global RNG
-            rng = np.random.default_rng([cfg.seed, cycle])
-            warmup = self.progress.episodes < o.warmup_episodes
-            rollouts = self.collect(cycle, generator, warmup)
-            for r in rollouts:
-                for episode in r.episodes():
-                    self.buffer.add_episode(*episode)
-            self._append_replay(rollouts)
-            if self.dataset is not None:
-                self._record(rollouts)
-            if self.progress.own_input_stats and (cycle == 0 or o.input_stats == "running"):
-                # No dataset statistics online: normalise inputs with those of the buffer's episodes
-                # (saved with the weights, so a resumed or evaluated policy uses the same ones).
-                self.policy.set_observation_stats(self.buffer.observation_stats())
-            n_episodes = sum(r.actions.shape[0] for r in rollouts)
-            self.progress.episodes += n_episodes
-            self.progress.env_steps += n_episodes * self.horizon
-            stats = self.optimise(rng, generator)
-            prev_step = self.progress.step - o.updates_per_cycle
-            is_last = cycle == self.n_cycles - 1
-            record = {
-                "cycle": cycle,
-                "step": self.progress.step,
-                "env_steps": self.progress.env_steps,
-                "episodes": self.progress.episodes,
-                "train_success_rate": float(np.concatenate([r.success for r in rollouts]).mean()),
-                "train_final_distance": float(
-                    np.nanmean(np.concatenate([r.final_distance for r in rollouts]))
-                ),
-                **stats,
-            }
-            if is_last or (
-                cfg.env_eval_freq > 0
-                and self.progress.step // cfg.env_eval_freq > prev_step // cfg.env_eval_freq
-            ):
-                last_eval = self.evaluate()
-                record.update(last_eval)
-            self.progress.cycle += 1
-            self.progress.wall_time_s += time.perf_counter() - t0
-            record["wall_time_s"] = self.progress.wall_time_s
-            with open(self.out / METRICS_FILE, "a") as f:
-                f.write(json.dumps(record) + "\n")
-            if self.wandb is not None:
-                evals = {k: v for k, v in record.items() if k.startswith("eval_")}
-                self.wandb.log_dict({k: v for k, v in record.items() if k not in evals}, self.progress.step)
-                if evals:
-                    self.wandb.log_dict(evals, self.progress.step, mode="eval")
-            if cfg.save_checkpoint and (
-                is_last
-                or (cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq)
-            ):
-                checkpoint = self.save_checkpoint()
+        try:
+            while self.progress.cycle < self.n_cycles:
+                t0, cycle = time.perf_counter(), self.progress.cycle
+                generator = torch.Generator().manual_seed(cycle_seed(cfg.seed, cycle))
+                torch.manual_seed(cycle_seed(cfg.seed, cycle))  # image augmentation draws from the global RNG
+                rng = np.random.default_rng([cfg.seed, cycle])
+                warmup = self.progress.episodes < o.warmup_episodes
+                rollouts = self.collect(cycle, generator, warmup)
+                for r in rollouts:
+                    for episode in r.episodes():
+                        self.buffer.add_episode(*episode)
+                self._append_replay(rollouts)
+                if self.dataset is not None:
+                    self._record(rollouts)
+                if self.progress.own_input_stats and (cycle == 0 or o.input_stats == "running"):
+                    # No dataset statistics online: normalise inputs with those of the buffer's episodes
+                    # (saved with the weights, so a resumed or evaluated policy uses the same ones).
+                    self.policy.set_observation_stats(self.buffer.observation_stats())
+                n_episodes = sum(r.actions.shape[0] for r in rollouts)
+                self.progress.episodes += n_episodes
+                self.progress.env_steps += n_episodes * self.horizon
+                stats = self.optimise(rng, generator)
+                prev_step = self.progress.step - o.updates_per_cycle
+                is_last = cycle == self.n_cycles - 1
+                record = {
+                    "cycle": cycle,
+                    "step": self.progress.step,
+                    "env_steps": self.progress.env_steps,
+                    "episodes": self.progress.episodes,
+                    "train_success_rate": float(np.concatenate([r.success for r in rollouts]).mean()),
+                    "train_final_distance": float(
+                        np.nanmean(np.concatenate([r.final_distance for r in rollouts]))
+                    ),
+                    **stats,
+                }
+                if is_last or (
+                    cfg.env_eval_freq > 0
+                    and self.progress.step // cfg.env_eval_freq > prev_step // cfg.env_eval_freq
+                ):
+                    last_eval = self.evaluate()
+                    record.update(last_eval)
+                self.progress.cycle += 1
+                self.progress.wall_time_s += time.perf_counter() - t0
+                record["wall_time_s"] = self.progress.wall_time_s
+                with open(self.out / METRICS_FILE, "a") as f:
+                    f.write(json.dumps(record) + "\n")
                 if self.wandb is not None:
-                    self.wandb.log_policy(checkpoint)
-            self._save_state_if_due(is_last)
-            bar.update(o.updates_per_cycle)
-            bar.set_postfix(
-                env_steps=self.progress.env_steps,
-                success=f"{record.get('eval_success_rate', record['train_success_rate']):.2f}",
-                q=f"{stats.get('q_mean', float('nan')):.2f}",
-            )
-        bar.close()
+                    evals = {k: v for k, v in record.items() if k.startswith("eval_")}
+                    self.wandb.log_dict(
+                        {k: v for k, v in record.items() if k not in evals}, self.progress.step
+                    )
+                    if evals:
+                        self.wandb.log_dict(evals, self.progress.step, mode="eval")
+                if cfg.save_checkpoint and (
+                    is_last
+                    or (
+                        cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq
+                    )
+                ):
+                    checkpoint = self.save_checkpoint()
+                    if self.wandb is not None:
+                        self.wandb.log_policy(checkpoint)
+                self._save_state_if_due(is_last)
+                bar.update(o.updates_per_cycle)
+                bar.set_postfix(
+                    env_steps=self.progress.env_steps,
+                    success=f"{record.get('eval_success_rate', record['train_success_rate']):.2f}",
+                    q=f"{stats.get('q_mean', float('nan')):.2f}",
+                )
+        finally:
+            bar.close()  # before any error message, so that message is the last line
         curve = self.out / "learning_curve.png"
         plot_learning_curve(self.out / METRICS_FILE, curve, title=cfg.job_name)
         if self.wandb is not None:

@@ -1,0 +1,42 @@
+"""Critic loss from images vs from the ground-truth state on one run's replay (``lerobot_indicator.bench.critic_fit``).
+
+    python scripts/critic_fit.py --run_dir=outputs/rgbd_reach/runs/reach_rgbd/indicator_balance_filter/seed_0 \
+        --out=docs/results/critic_fit_reach_rgbd.json
+"""
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+import torch
+
+from lerobot_indicator.bench.critic_fit import fit_critic
+
+ARMS = {
+    "state (ground truth, for reference)": ("state", {}),
+    "images, drq encoder": ("rgbd", {}),
+    "images, drq encoder, inverse dynamics 1.0": ("rgbd", {"inverse_dynamics": 1.0}),
+    "images, drq encoder, no augmentation": ("rgbd", {"augment_pad": 0}),
+}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--run_dir", type=Path, required=True)
+    parser.add_argument("--updates", type=int, default=1000)
+    parser.add_argument("--image_size", type=int, default=64)
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    results = {}
+    for name, (inputs, config) in ARMS.items():
+        results[name] = fit_critic(args.run_dir, inputs, args.updates, args.image_size, **config)
+        print(name, [round(c["critic_loss"], 3) for c in results[name]["curve"]], flush=True)
+    record = {"command": shlex.join(["python", *sys.argv]), "run_dir": str(args.run_dir), "arms": results}
+    args.out.write_text(json.dumps(record, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

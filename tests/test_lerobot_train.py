@@ -209,3 +209,37 @@ def test_rgbd_dataset_batch_trains_through_lerobot_factories(tmp_path: Path):
     loss, stats = policy.forward(batch, generator=torch.Generator().manual_seed(0))
     loss.backward()
     assert loss.isfinite() and 0 < stats["frac_positive"] < 1
+
+
+def test_offline_only_online_trainer_trains_from_the_dataset_without_rollouts(tiny_reach: Path, tmp_path):
+    """``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0``: updates from the in-memory buffer
+    of the dataset's episodes, no env steps collected (the env only evaluates)."""
+    out = tmp_path / "run"
+    cmd = [
+        str(BIN / "lerobot-indicator-train"),
+        "--env.type=sawyer_reach",
+        "--env.obs_type=state",
+        f"--env.episode_length={T}",
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        "--policy.device=cpu",
+        "--policy.hidden_dims=[16,16,16]",
+        f"--dataset.repo_id={REPO_ID}",
+        f"--dataset.root={tiny_reach}",
+        "--online.episodes_per_cycle=0",
+        "--online.n_envs=1",
+        "--online.use_async_envs=false",
+        "--online.updates_per_cycle=5",
+        "--online.batch_size=8",
+        "--online.eval_episodes=1",
+        "--env_eval_freq=10",
+        "--steps=10",
+        f"--output_dir={out}",
+    ]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": "egl"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [5, 10]
+    assert all(r["env_steps"] == 0 and r["episodes"] == EPISODES for r in rows)
+    assert np.isfinite(rows[-1]["critic_loss"]) and "eval_success_rate" in rows[-1]

@@ -24,7 +24,8 @@ class OnlineConfig:
     # Parallel env processes (gymnasium AsyncVectorEnv when > 1 and use_async_envs).
     n_envs: int = 2
     use_async_envs: bool = True
-    # Episodes collected per cycle (rounded up to a multiple of n_envs) and gradient steps per cycle.
+    # Episodes collected per cycle (rounded up to a multiple of n_envs; 0 with --dataset.*: train on the
+    # dataset alone, from the in-memory buffer) and gradient steps per cycle.
     episodes_per_cycle: int = 4
     updates_per_cycle: int = 40
     # Batch size; None = the paper's (256 for state inputs, 128 for images).
@@ -95,9 +96,14 @@ class OnlineTrainConfig(HubMixin):
                 f"the online trainer trains indicator_ddpg policies, got --policy.type={self.policy.type}"
             )
         o = self.online
-        for name in ("n_envs", "episodes_per_cycle", "updates_per_cycle", "eval_episodes"):
+        for name in ("n_envs", "updates_per_cycle", "eval_episodes"):
             if getattr(o, name) < 1:
                 raise ValueError(f"--online.{name} must be >= 1, got {getattr(o, name)}")
+        if o.episodes_per_cycle < 0 or (o.episodes_per_cycle == 0 and self.dataset is None):
+            raise ValueError(
+                f"--online.episodes_per_cycle must be >= 1, or 0 with a --dataset.* to train on offline only, "
+                f"got {o.episodes_per_cycle}"
+            )
         if o.input_stats not in INPUT_STATS:
             raise ValueError(f"--online.input_stats must be one of {INPUT_STATS}, got {o.input_stats!r}")
         if self.record.checkpoint_every_s < 0:

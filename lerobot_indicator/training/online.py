@@ -356,82 +356,22 @@ class OnlineTrainer:
         return ckpt
 
     def train(self) -> dict[str, float]:
-        cfg, o = self.cfg, self.cfg.online
-        if cfg.resume:
-            self._load_resume_state()
-        else:
-            self.progress.own_input_stats = cfg.policy.pretrained_path is None
-        if not cfg.resume and cfg.dataset is not None:
-            self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
-            self.progress.episodes = self.progress.seeded_episodes
-        self._record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
-        self._record_checkpoint_t = -math.inf  # the first cycle always leaves a resume state
-        last_eval: dict[str, float] = {}
-        bar = tqdm(total=cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step")
+        """Paper Algorithm 1: per cycle, collect episodes, store them, run the learning core's updates."""
+        self._start()
+        bar = tqdm(
+            total=self.cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step"
+        )
         try:
             while self.progress.cycle < self.n_cycles:
                 t0, cycle = time.perf_counter(), self.progress.cycle
-                generator = torch.Generator().manual_seed(cycle_seed(cfg.seed, cycle))
-                torch.manual_seed(cycle_seed(cfg.seed, cycle))  # image augmentation draws from the global RNG
-                rng = np.random.default_rng([cfg.seed, cycle])
-                warmup = self.progress.episodes < o.warmup_episodes
-                rollouts = self.collect(cycle, generator, warmup)
-                for r in rollouts:
-                    for episode in r.episodes():
-                        self.buffer.add_episode(*episode)
-                self._append_replay(rollouts)
-                if self.dataset is not None:
-                    self._record(rollouts)
-                if self.progress.own_input_stats and (cycle == 0 or o.input_stats == "running"):
-                    # No dataset statistics online: normalise inputs with those of the buffer's episodes
-                    # (saved with the weights, so a resumed or evaluated policy uses the same ones).
-                    self.policy.set_observation_stats(self.buffer.observation_stats())
-                n_episodes = sum(r.actions.shape[0] for r in rollouts)
-                self.progress.episodes += n_episodes
-                self.progress.env_steps += n_episodes * self.horizon
-                stats = self.optimise(rng, generator)
-                prev_step = self.progress.step - o.updates_per_cycle
-                is_last = cycle == self.n_cycles - 1
-                record = {
-                    "cycle": cycle,
-                    "step": self.progress.step,
-                    "env_steps": self.progress.env_steps,
-                    "episodes": self.progress.episodes,
-                    "train_success_rate": float(np.concatenate([r.success for r in rollouts]).mean()),
-                    "train_final_distance": float(
-                        np.nanmean(np.concatenate([r.final_distance for r in rollouts]))
-                    ),
-                    **stats,
-                }
-                if is_last or (
-                    cfg.env_eval_freq > 0
-                    and self.progress.step // cfg.env_eval_freq > prev_step // cfg.env_eval_freq
-                ):
-                    last_eval = self.evaluate()
-                    record.update(last_eval)
-                self.progress.cycle += 1
-                self.progress.wall_time_s += time.perf_counter() - t0
-                record["wall_time_s"] = self.progress.wall_time_s
-                with open(self.out / METRICS_FILE, "a") as f:
-                    f.write(json.dumps(record) + "\n")
-                if self.wandb is not None:
-                    evals = {k: v for k, v in record.items() if k.startswith("eval_")}
-                    self.wandb.log_dict(
-                        {k: v for k, v in record.items() if k not in evals}, self.progress.step
-                    )
-                    if evals:
-                        self.wandb.log_dict(evals, self.progress.step, mode="eval")
-                if cfg.save_checkpoint and (
-                    is_last
-                    or (
-                        cfg.save_freq > 0 and self.progress.step // cfg.save_freq > prev_step // cfg.save_freq
-                    )
-                ):
-                    checkpoint = self.save_checkpoint()
-                    if self.wandb is not None:
-                        self.wandb.log_policy(checkpoint)
-                self._save_state_if_due(is_last)
-                bar.update(o.updates_per_cycle)
+                rng, generator = self._cycle_randomness(cycle)
+                rollouts = self.collect(
+                    cycle, generator, warmup=self.progress.episodes < self.cfg.online.warmup_episodes
+                )
+                self.store(rollouts)
+                stats = self.optimise(rng, generator)  # relabel -> indicator reward -> filter -> DDPG update
+                record = self._end_cycle(cycle, rollouts, stats, t0)
+                bar.update(self.cfg.online.updates_per_cycle)
                 bar.set_postfix(
                     env_steps=self.progress.env_steps,
                     success=f"{record.get('eval_success_rate', record['train_success_rate']):.2f}",
@@ -439,6 +379,95 @@ class OnlineTrainer:
                 )
         finally:
             bar.close()  # before any error message, so that message is the last line
+        return self._finish()
+
+    def _start(self) -> None:
+        cfg = self.cfg
+        if cfg.resume:
+            self._load_resume_state()
+        else:
+            self.progress.own_input_stats = cfg.policy.pretrained_path is None
+        if not cfg.resume and cfg.dataset is not None:
+            self.progress.seeded_episodes = seed_buffer(self.buffer, cfg.dataset, stored_keys(self.keys))
+            self.progress.episodes = self.progress.seeded_episodes
+            if self.progress.own_input_stats:
+                self.policy.set_observation_stats(self.buffer.observation_stats())
+        self._record_skip = self._episodes_recorded_ahead() if self.dataset is not None else 0
+        self._record_checkpoint_t = -math.inf  # the first cycle always leaves a resume state
+        self._last_eval: dict[str, float] = {}
+
+    def _cycle_randomness(self, cycle: int) -> tuple[np.random.Generator, torch.Generator]:
+        """Everything random in a cycle comes from (seed, cycle), so a resumed run replays it exactly."""
+        torch.manual_seed(cycle_seed(self.cfg.seed, cycle))  # image augmentation draws from the global RNG
+        generator = torch.Generator().manual_seed(cycle_seed(self.cfg.seed, cycle))
+        return np.random.default_rng([self.cfg.seed, cycle]), generator
+
+    def store(self, rollouts: list[Rollouts]) -> None:
+        """New episodes into the replay buffer, its on-disk chunks and the --record dataset; input stats."""
+        for r in rollouts:
+            for episode in r.episodes():
+                self.buffer.add_episode(*episode)
+        if rollouts:
+            self._append_replay(rollouts)
+        if self.dataset is not None:
+            self._record(rollouts)
+        o = self.cfg.online
+        if (
+            rollouts
+            and self.progress.own_input_stats
+            and (self.progress.cycle == 0 or o.input_stats == "running")
+        ):
+            # No dataset statistics online: normalise inputs with those of the buffer's episodes
+            # (saved with the weights, so a resumed or evaluated policy uses the same ones).
+            self.policy.set_observation_stats(self.buffer.observation_stats())
+        n_episodes = sum(r.actions.shape[0] for r in rollouts)
+        self.progress.episodes += n_episodes
+        self.progress.env_steps += n_episodes * self.horizon
+
+    def _end_cycle(self, cycle: int, rollouts: list[Rollouts], stats: dict[str, float], t0: float) -> dict:
+        """Evaluate, log, checkpoint and save the resume state as due; returns the cycle's metrics."""
+        cfg = self.cfg
+        prev_step = self.progress.step - cfg.online.updates_per_cycle
+        is_last = cycle == self.n_cycles - 1
+
+        def due(freq: int) -> bool:
+            return is_last or (freq > 0 and self.progress.step // freq > prev_step // freq)
+
+        success = np.concatenate([r.success for r in rollouts]) if rollouts else np.full(1, np.nan)
+        distance = np.concatenate([r.final_distance for r in rollouts]) if rollouts else np.full(1, np.nan)
+        record = {
+            "cycle": cycle,
+            "step": self.progress.step,
+            "env_steps": self.progress.env_steps,
+            "episodes": self.progress.episodes,
+            "train_success_rate": float(np.mean(success)),
+            "train_final_distance": float(np.nanmean(distance))
+            if np.isfinite(distance).any()
+            else float("nan"),
+            **stats,
+        }
+        if due(cfg.env_eval_freq):
+            self._last_eval = self.evaluate()
+            record.update(self._last_eval)
+        self.progress.cycle += 1
+        self.progress.wall_time_s += time.perf_counter() - t0
+        record["wall_time_s"] = self.progress.wall_time_s
+        with open(self.out / METRICS_FILE, "a") as f:
+            f.write(json.dumps(record) + "\n")
+        if self.wandb is not None:
+            evals = {k: v for k, v in record.items() if k.startswith("eval_")}
+            self.wandb.log_dict({k: v for k, v in record.items() if k not in evals}, self.progress.step)
+            if evals:
+                self.wandb.log_dict(evals, self.progress.step, mode="eval")
+        if cfg.save_checkpoint and due(cfg.save_freq):
+            checkpoint = self.save_checkpoint()
+            if self.wandb is not None:
+                self.wandb.log_policy(checkpoint)
+        self._save_state_if_due(is_last)
+        return record
+
+    def _finish(self) -> dict[str, float]:
+        cfg = self.cfg
         curve = self.out / "learning_curve.png"
         plot_learning_curve(self.out / METRICS_FILE, curve, title=cfg.job_name)
         if self.wandb is not None:
@@ -454,7 +483,7 @@ class OnlineTrainer:
             self.policy.push_model_to_hub(cfg)
             self.processors.pre.push_to_hub(cfg.policy.repo_id)
             self.processors.post.push_to_hub(cfg.policy.repo_id)
-        return {**last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
+        return {**self._last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
 
     def close(self) -> None:
         """Also on a crash: finalize the recorded dataset so every saved episode stays readable (its

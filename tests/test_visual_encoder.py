@@ -46,6 +46,10 @@ def test_presets_fill_the_conv_fields_and_explicit_values_win():
     assert drq.target_actor.encoder is drq.target_critic.encoder is not drq.critic.encoder
     with pytest.raises(IndicatorDDPGConfigError, match="one stride per conv layer"):
         policy_and_batch(conv_channels=[8, 8])
+    with pytest.raises(
+        ValueError, match=r"images of 16x16 px are too small for the 'drq' encoder's conv layers"
+    ):
+        policy_and_batch(size=16)
 
 
 def test_random_shift_is_a_clamped_translation_shared_by_all_keys():

@@ -137,13 +137,20 @@ class ObservationEncoder(nn.Module):
                     nn.ReLU() if drq else Tanh(),
                 ]
                 in_ch = ch
+            size = min(height, width)
+            for stride in config.conv_strides:
+                size = (size - config.conv_kernel_size) // stride + 1
+            if size < 1:
+                raise ValueError(
+                    f"images of {height}x{width} px are too small for the {config.image_encoder!r} encoder's conv "
+                    f"layers (kernel {config.conv_kernel_size}, strides {config.conv_strides}): use larger images "
+                    "or fewer / smaller strides (--policy.conv_strides)"
+                )
             self.conv = nn.Sequential(*layers)
             self.conv_precision = config.conv_precision
             self.fold_normalization = drq
             with torch.no_grad():
                 fmap = self.conv(torch.zeros(1, channels, height, width))
-            if fmap.shape[-1] < 1 or fmap.shape[-2] < 1:
-                raise ValueError(f"images of {height}x{width} px are too small for the conv layers")
             pool: nn.Module = nn.Flatten()
             pooled_dim = int(fmap[0].numel())
             if config.spatial_softmax:

@@ -332,21 +332,25 @@ def checkpoint_dataset(cfg: RecordConfig, dataset: LeRobotDataset) -> LeRobotDat
     return _resume(cfg)
 
 
+def _create(cfg: RecordConfig, features: dict, root: Path) -> LeRobotDataset:
+    return LeRobotDataset.create(
+        cfg.repo_id,
+        fps=cfg.env.fps,
+        features=features,
+        root=root,
+        use_videos=cfg.use_videos,
+        video_backend="pyav",
+        image_writer_threads=cfg.image_writer_threads,
+    )
+
+
 def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
     """A dataset written straight into ``cfg.root`` (the online trainer's ``--record.*``): crash safety
     comes from :func:`checkpoint_dataset`'s rollback journal. The recorder uses :class:`StagedRecording`."""
     root = cfg.root
     _check_root(cfg)
     if not cfg.resume:
-        dataset = LeRobotDataset.create(
-            cfg.repo_id,
-            fps=cfg.env.fps,
-            features=features,
-            root=root,
-            use_videos=cfg.use_videos,
-            video_backend="pyav",
-            image_writer_threads=cfg.image_writer_threads,
-        )
+        dataset = _create(cfg, features, root)
         _write_settings(cfg)
         return dataset
     restore_checkpoint(root)  # no-op unless the last recording was killed
@@ -401,15 +405,7 @@ class StagedRecording:
                 raise
         else:
             stage = stage_root(self.root)
-            self.dataset = LeRobotDataset.create(
-                cfg.repo_id,
-                fps=cfg.env.fps,
-                features=features,
-                root=stage,
-                use_videos=cfg.use_videos,
-                video_backend="pyav",
-                image_writer_threads=cfg.image_writer_threads,
-            )
+            self.dataset = _create(cfg, features, stage)
             _write_settings(cfg)
             write_atomic(self.root / INFO, info_json(self.dataset.meta.info.to_dict()))  # 0 episodes
         info = self.dataset.meta.info

@@ -1,4 +1,5 @@
-"""Critic loss from images vs from the ground-truth state on one run's replay (``lerobot_indicator.bench.critic_fit``).
+"""Critic loss from images vs from the ground-truth state on one run's replay, and how well the same encoder
+locates the end effector when trained supervised (``lerobot_indicator.bench.critic_fit``).
 
     python scripts/critic_fit.py --run_dir=outputs/rgbd_reach/runs/reach_rgbd/indicator_balance_filter/seed_0 \
         --out=docs/results/critic_fit_reach_rgbd.json
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import torch
 
-from lerobot_indicator.bench.critic_fit import fit_critic
+from lerobot_indicator.bench.critic_fit import fit_critic, localization_probe
 
 ARMS = {
     "state (ground truth, for reference)": ("state", {}),
@@ -34,7 +35,14 @@ def main() -> None:
     for name, (inputs, config) in ARMS.items():
         results[name] = fit_critic(args.run_dir, inputs, args.updates, args.image_size, **config)
         print(name, [round(c["critic_loss"], 3) for c in results[name]["curve"]], flush=True)
-    record = {"command": shlex.join(["python", *sys.argv]), "run_dir": str(args.run_dir), "arms": results}
+    probe = localization_probe(args.run_dir, 3 * args.updates, args.image_size)
+    print("supervised end-effector position from one frame:", probe["curve"], flush=True)
+    record = {
+        "command": shlex.join(["python", *sys.argv]),
+        "run_dir": str(args.run_dir),
+        "arms": results,
+        "supervised_localization": probe,
+    }
     args.out.write_text(json.dumps(record, indent=2) + "\n")
 
 

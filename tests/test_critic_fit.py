@@ -40,3 +40,12 @@ def test_state_critic_fits_and_the_image_path_reads_the_same_episodes(tmp_path):
     assert losses[-1] < 0.6 * losses[0], losses  # the reward is learnable from the true positions
     images = fit_critic(run, "rgbd", 20, 24, horizon=5, batch_size=16, every=10, hidden_dims=[8, 8, 8])
     assert images["episodes"] == 8 and len(images["curve"]) == 2
+
+
+def test_localization_probe_reports_a_test_error_curve(tmp_path):
+    from lerobot_indicator.bench.critic_fit import localization_probe
+
+    run = fake_run(tmp_path, episodes=30)
+    probe = localization_probe(run, 20, 24, horizon=5, batch_size=16, every=10, hidden_dims=[8])
+    assert probe["frames"] == 30 * 6 and [c["updates"] for c in probe["curve"]] == [10, 20]
+    assert all(c["test_error_mean_m"] > 0 for c in probe["curve"])

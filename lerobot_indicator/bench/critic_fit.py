@@ -73,3 +73,49 @@ def fit_critic(
         "curve": curve,
         "wall_s": time.perf_counter() - start,
     }
+
+
+def localization_probe(
+    run_dir: Path, updates: int, image_size: int, horizon: int = 25, batch_size: int = 128, max_chunks: int = 60,
+    every: int = 500, seed: int = 0, **config: object,
+) -> dict:  # fmt: skip
+    """The same encoder trained *supervised* to predict the end-effector position (ground truth) from one
+    frame: what the image pipeline can represent, as a bound for what the critic could learn from it."""
+    buffer = load_chunks(run_dir, horizon, "rgbd", max_chunks)
+    torch.manual_seed(seed)
+    encoder = make_policy(rgbd_features(image_size), **config).critic.encoder
+    encoder.set_stats(buffer.observation_stats())
+    keys = [k for k in buffer.obs if k in encoder.image_keys]
+    n = buffer.num_episodes
+    frames = {k: buffer.obs[k].data[:n].reshape(-1, *buffer.obs[k].data.shape[2:]) for k in keys}
+    target = torch.from_numpy(buffer.gt_achieved[:n].reshape(-1, buffer.gt_achieved.shape[-1]))
+    perm = torch.randperm(len(target), generator=torch.Generator().manual_seed(seed))
+    n_test = min(500, len(target) // 5)
+    test, train = perm[:n_test], perm[n_test:]
+    mean, std = target[train].mean(0), target[train].std(0)
+    head = torch.nn.Linear(encoder.out_dim, target.shape[1])
+    optimizer = torch.optim.Adam([*encoder.parameters(), *head.parameters()], lr=1e-3)
+
+    def predict(rows: torch.Tensor) -> torch.Tensor:
+        obs = {k: torch.from_numpy(v[rows.numpy()]) for k, v in frames.items()}
+        obs = {k: v.float() if v.dtype == torch.uint16 else v for k, v in obs.items()}
+        return head(encoder(obs)) * std + mean
+
+    curve = []
+    for step in range(1, updates + 1):
+        rows = train[torch.randint(0, len(train), (batch_size,))]
+        loss = (((predict(rows) - target[rows]) / std) ** 2).mean()
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        if step % every == 0:
+            with torch.no_grad():
+                err = torch.linalg.vector_norm(predict(test) - target[test], dim=1)
+            curve.append(
+                {
+                    "updates": step,
+                    "test_error_mean_m": float(err.mean()),
+                    "test_error_median_m": float(err.median()),
+                }
+            )
+    return {"frames": len(target), "curve": curve}

@@ -118,3 +118,15 @@ def test_observation_stats_cover_frames_and_goals_of_the_stored_episodes():
         buf.add_episode(*_episode(e))
     state = np.concatenate([_frames_and_goal(e, "observation.state") for e in range(2, 6)])
     np.testing.assert_allclose(buf.observation_stats()["observation.state"]["mean"], state.mean(0), rtol=1e-6)
+
+
+def test_packing_keeps_the_sign_of_zero_bit_for_bit():
+    """An integer-valued float state with -0.0 must not be packed into an integer dtype (it would return +0.0)."""
+    T = 2
+    buf = EpisodeReplayBuffer(4 * T, T)
+    state = np.array([[0.0, 1.0], [-0.0, 2.0], [3.0, 0.0]], np.float32)
+    buf.add_episode(
+        {"observation.state": state, "observation.goal_state": state[:1]}, np.zeros((T, 1), np.float32)
+    )
+    stored = buf.obs["observation.state"][0]
+    assert np.array_equal(stored.view(np.uint32), state.view(np.uint32))

@@ -41,7 +41,8 @@ def _pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarra
     if scaled.size and (scaled.min() < info.min or scaled.max() > info.max):
         return None
     packed = scaled.astype(dtype)
-    return packed if np.array_equal(_unpack(packed, scale), value) else None
+    # Bit patterns, not values: -0.0 packs to 0 and would come back as +0.0 (they compare equal as floats).
+    return packed if np.array_equal(_unpack(packed, scale).view(np.uint32), value.view(np.uint32)) else None
 
 
 class _PackedArray:

@@ -36,6 +36,12 @@ def git_blob_oid(content: bytes) -> str:
     return hashlib.sha1(b"blob %d\0" % len(content) + content).hexdigest()
 
 
+def _check_repo_path(path: str) -> None:
+    """The Hub refuses paths that leave the repository: absolute ones and any ``..`` segment."""
+    if path.startswith("/") or ".." in path.split("/"):
+        raise HubError(400, f"Invalid path {path!r}: it must stay inside the repository")
+
+
 class HubError(Exception):
     def __init__(self, status: int, message: str, error_code: str | None = None, extra: dict | None = None):
         super().__init__(message)
@@ -216,6 +222,7 @@ class LocalHub:
             files = dict(repo.commits[parent].files)
             for line in lines[1:]:
                 key, value = line["key"], line["value"]
+                _check_repo_path(value.get("path", ""))
                 if key == "file":
                     if value.get("encoding") != "base64":
                         raise HubError(400, f"unsupported encoding {value.get('encoding')!r}")

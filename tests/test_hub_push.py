@@ -127,3 +127,29 @@ def test_branch_push_and_unchanged_files_are_skipped(tmp_path, local_hub):
     )
     assert len(repo.commits) == commits_before  # preupload returned the same blob ids: nothing to commit
     assert info.oid == repo.branches["dev"]
+
+
+def test_local_hub_refuses_commit_paths_outside_the_repository(tmp_path, local_hub):
+    """A commit path with ``..`` segments is refused with a 400, as by the real Hub (``huggingface_hub`` checks
+    its own paths client-side, so the request is sent raw), and nothing is written beside the repo folder."""
+    import base64
+    import os
+    import urllib.error
+    import urllib.request
+
+    repo_id = HfApi().create_repo("escape", repo_type="dataset").repo_id
+    lines = [
+        {"key": "header", "value": {"summary": "escape"}},
+        {"key": "file", "value": {"path": "sub/../../outside.txt", "encoding": "base64",
+                                  "content": base64.b64encode(b"x").decode()}},
+    ]  # fmt: skip
+    request = urllib.request.Request(
+        f"{local_hub.url}/api/datasets/{repo_id}/commit/main",
+        data="\n".join(json.dumps(line) for line in lines).encode(),
+        headers={"Content-Type": "application/x-ndjson", "Authorization": f"Bearer {os.environ['HF_TOKEN']}"},
+        method="POST",
+    )
+    with pytest.raises(urllib.error.HTTPError) as error:
+        urllib.request.urlopen(request)
+    assert error.value.code == 400 and b"must stay inside the repository" in error.value.read()
+    assert not list((tmp_path / "local_hub").rglob("outside.txt"))

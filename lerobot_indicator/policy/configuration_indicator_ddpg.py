@@ -143,9 +143,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     compile_model: bool = False
     compile_mode: str = "default"
     # torch intra-op threads while this policy trains or acts on CPU (both trainers and lerobot-eval build it),
-    # None = torch's default. 1 is the fastest on the project's 2-core machines, whose second core also runs
-    # env workers and data loading: OpenMP threads spinning against them made updates slower, not faster
-    # (docs/results/policy_updates.json has the measurement).
+    # None = torch's default (one per core). 1 is the default because the second core is usually busy: with
+    # lerobot-train's loader workers or other jobs, OpenMP threads spinning against them made updates ~3x slower.
+    # A lone online run on an idle 2-core machine updates faster with 2 (1.3x state, 1.7x RGB-D at 64 px):
+    # docs/results/policy_updates.json has both.
     cpu_threads: int | None = 1
     # Exploration (used by the online trainer only, never by select_action).
     noise_eps: float = 0.2

@@ -9,7 +9,7 @@ ROBOSUITE := robosuite==1.5.2
 PYTEST_ARGS ?=
 export MUJOCO_GL ?= egl
 
-.PHONY: install test lint format demo demo-rgbd mutation clean
+.PHONY: install test lint format demo demo-rgbd clean
 
 install: $(STAMP)
 

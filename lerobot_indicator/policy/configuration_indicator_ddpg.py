@@ -14,8 +14,7 @@ BALANCE_FALLBACKS = ("recorded", "next")
 # Per image encoder: the values of the conv and augmentation fields left at None. "paper": the appendix's
 # 4 conv layers of 2x2 kernels, stride 2, 16/32/64/64 filters (as in the authors' HER code), no augmentation.
 # "drq": DrQ-v2's 3x3 convs and 4-pixel random shift, with a second stride-2 layer and 16 filters in the first
-# two layers (DrQ-v2: 32 everywhere, strides 2/1/1/1), which cut the CPU cost of an update ~3x at 64-100 px
-# (docs/policy.md).
+# two layers (DrQ-v2: 32 everywhere, strides 2/1/1/1), which cut the CPU cost of an update at 64-100 px.
 ENCODER_PRESETS = {
     "paper": {
         "conv_channels": [16, 32, 64, 64],
@@ -100,7 +99,7 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     # Networks (paper appendix): 3 hidden layers of 256, tanh; conv weights shared by observation and goal.
     hidden_dims: list[int] = field(default_factory=lambda: [256, 256, 256])
-    # Image encoder (docs/policy.md compares the two):
+    # Image encoder (docs/policy.md describes both; docs/results/policy_updates.json times them):
     # "drq": one encoder shared by actor and critic and trained by the critic loss only (the actor sees
     #   detached features), ReLU convs, a linear projection with LayerNorm + tanh, random-shift augmentation;
     #   the design of DrQ-v2 and of LeRobot's SAC (gaussian_actor) encoder.
@@ -118,7 +117,7 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     augment_pad: int | None = None
     # Precision of the conv layers: "float32", "bfloat16" (autocast; the rest of the networks stays float32)
     # or "auto" = bfloat16 where the device computes it natively (CUDA with bf16; CPUs with AVX512-BF16 or
-    # AMX), float32 elsewhere, where bf16 would be emulated and slower (docs/policy.md has the measurements).
+    # AMX), float32 elsewhere, where bf16 would be emulated and slower (docs/results/policy_updates.json).
     conv_precision: str = "auto"
     # "drq" only: weight of a self-supervised inverse-dynamics loss on the shared encoder, ||g(enc(o_t),
     # enc(o_{t+1})) - a_t||^2, which needs no ground truth (the actions are the agent's own) and makes the

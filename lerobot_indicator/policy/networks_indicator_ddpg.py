@@ -68,14 +68,13 @@ class _RationalTanh(torch.autograd.Function):
 def tanh(x: Tensor) -> Tensor:
     """tanh; on CPU computed by the fastest float32-accurate formula for the executor.
 
-    ATen's CPU tanh kernel took 210 us on a 256x256 tensor on the project's AVX2 CPUs, and the 3x256 tanh MLPs
-    call it 17 times per DDPG update (~20% of a state update with torch.tanh; most of an RGB-D one, over the
-    conv feature maps). Eager: 2 sigmoid(2x) - 1 (100 us, max abs error 2e-7, torch.tanh's 6e-8) with torch's
-    ``tanh_backward``. Under ``torch.compile`` (``compile_model``), where Inductor's own tanh is as slow as
-    ATen's: Eigen's / XLA's clamped rational approximation (13/6 odd/even polynomials, max abs error 4e-7),
-    which Inductor fuses into one 67 us kernel; in eager it would be ~15 separate ops (316 us). The compiled
-    branch is out of place: compile mis-traced the eager function's in-place ops (zero gradients below the
-    last layer). Elsewhere (CUDA) torch.tanh is already fast and is used as is.
+    ATen's CPU tanh kernel is slow enough to be a large share of a state-based update (the 3x256 tanh MLPs call
+    it 17 times). Eager: 2 sigmoid(2x) - 1 (max abs error 2e-7) with torch's ``tanh_backward``. Under
+    ``torch.compile`` (``compile_model``), where Inductor's own tanh is as slow as ATen's: Eigen's / XLA's
+    clamped rational approximation (13/6 odd/even polynomials, max abs error 4e-7), which Inductor fuses into
+    one kernel (in eager it would be ~15 separate ops). The compiled branch is out of place: compile mis-traces
+    in-place ops here (zero gradients below the last layer). On CUDA torch.tanh is fast and used as is.
+    Timings: docs/results/README.md, "vs Stable-Baselines3".
     """
     if x.device.type != "cpu":
         return torch.tanh(x)
@@ -231,7 +230,7 @@ class ObservationEncoder(nn.Module):
             images = torch.cat(
                 [self.normalize(k, as_float(f)) for k, f in zip(self.image_keys, frames, strict=True)], 1
             )
-        # channels_last: the layout oneDNN's CPU convolutions are fastest in (about 2x here).
+        # channels_last: the layout oneDNN's CPU convolutions are fastest in.
         images = images.contiguous(memory_format=torch.channels_last)
         with torch.autocast(device, torch.bfloat16, enabled=bf16):
             first, rest = self.conv[0], self.conv[1:]
@@ -282,7 +281,7 @@ def random_shift(frames: list[Tensor], shift: Tensor) -> list[Tensor]:
     LeRobot's ``lerobot.rl.buffer.random_shift`` draws its own shift per call (per key) and pads a copy first;
     here the shift is given (the learning core shares one between a transition's o_t, o_{t+1} and goal) and
     the replicating pad is folded into clamped indices of one ``index_select`` per key, with no padded copy and
-    frames in their stored dtype (uint8 moves a quarter of float32's bytes): 2x faster on CPU.
+    frames in their stored dtype (uint8 moves a quarter of float32's bytes).
     """
     b, _, h, w = frames[0].shape
     device = frames[0].device

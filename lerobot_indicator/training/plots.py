@@ -10,30 +10,37 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+# (y label, series, whether the series are rates in [0, 1] and get a fixed [0, 1] axis)
 PANELS = (
-    ("success rate", ("eval_success_rate", "train_success_rate")),
-    ("final distance to goal (ground truth)", ("eval_final_distance", "train_final_distance")),
-    ("indicator reward vs ground truth", ("reward_accuracy", "false_negative_rate")),
-    ("mean Q(o, g, a)", ("q_mean", "q_target_mean")),
-    ("fraction of sampled transitions", ("frac_positive", "frac_filtered")),
+    ("success rate", ("eval_success_rate", "train_success_rate"), True),
+    ("final distance to goal (ground truth)", ("eval_final_distance", "train_final_distance"), False),
+    ("indicator reward vs ground truth", ("reward_accuracy", "false_negative_rate"), True),
+    ("mean Q(o, g, a)", ("q_mean", "q_target_mean"), False),
+    ("fraction of sampled transitions", ("frac_positive", "frac_filtered"), True),
 )
+# The second series of a panel is dashed and drawn thinner on top, so a first series it covers stays visible.
+STYLES = ({"lw": 2.2, "ls": "-"}, {"lw": 1.2, "ls": "--"})
 
 
 def read_metrics(path: Path) -> list[dict]:
     return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
 
 
-def plot_learning_curve(metrics_path: Path, png_path: Path, title: str | None = None) -> Path:
-    """Panels vs environment steps; series absent from the log (e.g. no ground truth) are skipped."""
-    rows = read_metrics(metrics_path)
+def learning_curve_figure(rows: list[dict], title: str | None = None) -> plt.Figure:
+    """Panels vs environment steps (vs optimisation steps for a run that collects none, e.g. offline);
+    series absent from the log (e.g. no ground truth) are skipped."""
+    offline = len({r["env_steps"] for r in rows}) <= 1
+    x_key, x_label = ("step", "optimisation steps") if offline else ("env_steps", "environment steps")
     fig, axes = plt.subplots(1, len(PANELS), figsize=(5 * len(PANELS), 3.8))
-    for ax, (ylabel, keys) in zip(axes, PANELS, strict=True):
-        for key in keys:
-            pts = [(r["env_steps"], r[key]) for r in rows if key in r]
+    for ax, (ylabel, keys, rate) in zip(axes, PANELS, strict=True):
+        for key, style in zip(keys, STYLES, strict=True):
+            pts = [(r[x_key], r[key]) for r in rows if key in r]
             if pts:
                 xs, ys = zip(*pts, strict=True)
-                ax.plot(xs, ys, marker="o" if key.startswith("eval") else None, ms=3, label=key)
-        ax.set_xlabel("environment steps")
+                ax.plot(xs, ys, marker="o" if key.startswith("eval") else None, ms=3, label=key, **style)
+        if rate:
+            ax.set_ylim(-0.02, 1.02)
+        ax.set_xlabel(x_label)
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         if ax.lines:
@@ -41,6 +48,11 @@ def plot_learning_curve(metrics_path: Path, png_path: Path, title: str | None = 
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    return fig
+
+
+def plot_learning_curve(metrics_path: Path, png_path: Path, title: str | None = None) -> Path:
+    fig = learning_curve_figure(read_metrics(metrics_path), title)
     fig.savefig(png_path, dpi=110)
     plt.close(fig)
     return Path(png_path)

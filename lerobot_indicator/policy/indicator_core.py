@@ -175,7 +175,7 @@ def encode_batch(
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
     everyone = torch.arange(source.shape[0], device=source.device)
     rest = (source != SOURCE_NEXT).nonzero().squeeze(1) if dedupe else everyone
-    goal_rest = {k: v[rest] for k, v in goal.items()}
+    goal_rest = {k: v[rest] for k, v in goal.items()} if dedupe else goal
     # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
     # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
     # few-pixel displacement an action makes into the shift noise.
@@ -189,7 +189,7 @@ def encode_batch(
         are one frame."""
         rows = shifts(*[everyone] * (len(frames) + 1), rest)
         *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
-        return [*h, h_next, h_next.index_put((rest,), h_rest)]
+        return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
 
     if config.shared_encoder:
         h_obs, h_next, h_goal = encode_with_next(critic.encoder, [obs])

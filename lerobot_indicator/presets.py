@@ -44,6 +44,13 @@ VARIANTS["indicator_balance_filter_fp32"] = [
     *METHODS["indicator_balance_filter"],
     "--policy.conv_precision=float32",
 ]
+# - n-step TD targets (docs/policy.md) and the inverse-dynamics loss on the shared image encoder.
+for _m in ("oracle", "indicator", "indicator_balance_filter"):
+    VARIANTS[f"{_m}_n3"] = [*METHODS[_m], "--policy.n_step=3"]
+VARIANTS["indicator_balance_filter_inverse_dynamics"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.inverse_dynamics=1.0",
+]
 METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
@@ -55,6 +62,10 @@ LABELS = {
     "indicator_balance_filter_recorded_fallback": "Indicator+Balance+Filter (t=T-1: recorded goal)",
     "indicator_balance_filter_paper_encoder": "Indicator+Balance+Filter, paper encoder",
     "indicator_balance_filter_fp32": "Indicator+Balance+Filter, float32 convs",
+    "oracle_n3": "Oracle, 3-step targets",
+    "indicator_n3": "Indicator, 3-step targets",
+    "indicator_balance_filter_n3": "Indicator+Balance+Filter, 3-step targets",
+    "indicator_balance_filter_inverse_dynamics": "Indicator+Balance+Filter, inverse-dynamics loss",
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -67,6 +78,10 @@ STYLES = {
     "indicator_balance_filter_recorded_fallback": ("tab:brown", "-."),
     "indicator_balance_filter_paper_encoder": ("tab:gray", "--"),
     "indicator_balance_filter_fp32": ("tab:pink", ":"),
+    "oracle_n3": ("tab:cyan", "-"),
+    "indicator_n3": ("gold", "-"),
+    "indicator_balance_filter_n3": ("black", "-"),
+    "indicator_balance_filter_inverse_dynamics": ("tab:brown", ":"),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 

@@ -56,7 +56,7 @@ def fit_critic(
     rng, generator = np.random.default_rng(seed), torch.Generator().manual_seed(seed)
     keys, losses, curve, start = policy.config.observation_keys, [], [], time.perf_counter()
     for step in range(1, updates + 1):
-        sample = buffer.sample(batch_size, rng, packed=True)
+        sample = buffer.sample(batch_size, rng, packed=True, n_step=policy.config.n_step)
         loss, stats = policy.forward(to_transition_batch(sample, keys, horizon, "cpu"), generator=generator)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()

@@ -133,6 +133,12 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     input_clip: float = 5.0
 
     # DDPG.
+    # n-step TD target (DrQ-v2 uses 3): sum_{i=1..n} gamma^(i-1) r_{t+i} + gamma^n Q'(o_{t+n}, g), with every
+    # r_{t+i} the same reward (indicator: o_{t+i} equals the goal) and n cut at the episode end. 1 = the paper's
+    # one-step target. From images a goal k steps ahead is worth its value only after k-1 bootstraps through
+    # learnt features; n > 1 carries the one exact match back n steps per update. Online trainer only: a
+    # lerobot-train sample holds o_t, o_{t+1} and the future frames, not the frames in between.
+    n_step: int = 1
     tau: float = 0.98  # target <- tau * target + (1 - tau) * online
     action_l2: float = 1.0  # baselines' HER penalty on the squared actor output
     learning_rate: float = 1e-3
@@ -205,6 +211,13 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if not self.future_offsets or min(self.future_offsets) < 2:
             raise ValueError(
                 f"future_offsets must be non-empty and all >= 2 (t' >= t+2), got {self.future_offsets}"
+            )
+        if self.n_step < 1:
+            raise ValueError(f"n_step must be >= 1 (1 = the paper's one-step TD target), got {self.n_step}")
+        if self.n_step > 1 and self.inverse_dynamics > 0:
+            raise ValueError(
+                "inverse_dynamics predicts a_t from (o_t, o_{t+1}), which an n-step update does not encode: "
+                "use one of n_step > 1 and inverse_dynamics > 0"
             )
         if not 0 <= self.tau <= 1:
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")

@@ -13,6 +13,9 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 ``future.valid``                             bool (B,): False when no t' >= t+2 exists (o_{t'} ignored)
 ``future.count`` (optional)                  long (B,): how many t' the candidate was drawn from
 ``next.valid`` (optional)                    bool (B,): False drops the transition (no o_{t+1})
+``path.k`` (``n_step`` > 1)                  o_{t+2..t+n}, (B, n-1, ...); steps past o_T hold o_T
+``path.valid`` (``n_step`` > 1)              bool (B, n-1): t+i <= T for i = 2..n
+``path.observation.gt_achieved_goal`` (o)    ground truth of o_{t+2..t+n} (oracle reward)
 ``next.observation.gt_achieved_goal`` (opt)  ground truth of o_{t+1}   } oracle reward and the reward
 ``future.observation.gt_achieved_goal`` (o)  ground truth of o_{t'}    } accuracy / false-negative
 ``observation.gt_desired_goal`` (optional)   ground truth of the goal  } statistics
@@ -21,6 +24,7 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -37,6 +41,9 @@ FUTURE = "future."
 HAS_FUTURE = FUTURE + "valid"
 FUTURE_COUNT = FUTURE + "count"
 NEXT_VALID = NEXT + "valid"
+PATH = "path."
+PATH_VALID = PATH + "valid"
+GT_PATH_ACHIEVED = PATH + OBS_GT_ACHIEVED_GOAL
 GT_NEXT_ACHIEVED = NEXT + OBS_GT_ACHIEVED_GOAL
 GT_FUTURE_ACHIEVED = FUTURE + OBS_GT_ACHIEVED_GOAL
 GT_DESIRED = OBS_GT_DESIRED_GOAL  # the recorded goal's ground truth: o_t's own key, no prefix
@@ -157,7 +164,7 @@ def encode_batch(
     obs: dict[str, Tensor],
     next_obs: dict[str, Tensor],
     goal: dict[str, Tensor],
-    source: Tensor,
+    goal_is_next: Tensor,
     actor: nn.Module,
     critic: Critic,
     target_actor: nn.Module,
@@ -166,20 +173,21 @@ def encode_batch(
 ) -> Features:
     """Every network's features, each distinct frame encoded once per encoder.
 
-    A goal that *is* o_{t+1} (``source`` next, about half the batch with balancing) reuses o_{t+1}'s
+    ``next_obs`` is the frame the TD target bootstraps from (o_{t+1}; o_{t+n} for n-step targets). A goal that
+    *is* that frame (``goal_is_next``: about half the batch with balancing and one-step targets) reuses its
     encoding. With the shared ("drq") encoder one conv pass over o_t, o_{t+1} and the other goals serves all
     four networks: the targets use the online encoder's features of (o_{t+1}, g) without gradients (DrQ-v2),
     or their own EMA encoder (``target_encoder``). Under ``torch.compile`` (static shapes) and for state
     inputs every goal is encoded, which gives the same values.
     """
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
-    everyone = torch.arange(source.shape[0], device=source.device)
-    rest = (source != SOURCE_NEXT).nonzero().squeeze(1) if dedupe else everyone
+    everyone = torch.arange(goal_is_next.shape[0], device=goal_is_next.device)
+    rest = (~goal_is_next).nonzero().squeeze(1) if dedupe else everyone
     goal_rest = {k: v[rest] for k, v in goal.items()} if dedupe else goal
     # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
     # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
     # few-pixel displacement an action makes into the shift noise.
-    shift = draw_shifts(source.shape[0], config.augment_pad, source.device) if config.image_keys else None
+    shift = draw_shifts(everyone.shape[0], config.augment_pad, everyone.device) if config.image_keys else None
 
     def shifts(*rows: Tensor) -> list[Tensor] | None:
         return None if shift is None else [shift[:, r] for r in rows]
@@ -227,6 +235,32 @@ def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
             t.copy_(o)
 
 
+def n_step_return(
+    batch: dict[str, Tensor],
+    keys: list[str],
+    first_reward: Tensor,
+    step_reward: Callable[[dict[str, Tensor], Tensor | None], Tensor],
+    config: IndicatorDDPGConfig,
+) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
+    """sum_{i=1..n'} gamma^(i-1) r_{t+i}, gamma^n' and o_{t+n'}, with n' = min(n, T - t).
+
+    ``first_reward`` is r_{t+1}; r_{t+i} (i >= 2) is ``step_reward`` of the batch's ``path`` frame o_{t+i} (the
+    same goal, the same comparison). Steps past the episode end add nothing; the path's last entry holds
+    o_{min(t+n, T)}, the frame the target bootstraps from.
+    """
+    path_valid = batch[PATH_VALID].bool()
+    gt_path = batch.get(GT_PATH_ACHIEVED)
+    returns, scale = first_reward.clone(), torch.ones_like(first_reward)
+    for i in range(path_valid.shape[1]):
+        scale = scale * torch.where(path_valid[:, i], config.gamma, 1.0)
+        frames = {k: batch[PATH + k][:, i] for k in keys}
+        r = step_reward(frames, None if gt_path is None else gt_path[:, i])
+        returns = returns + torch.where(path_valid[:, i], scale * r, 0.0)
+    steps = 1 + path_valid.sum(dim=1)
+    discount = torch.pow(torch.full_like(first_reward, config.gamma), steps.to(first_reward.dtype))
+    return returns, discount, {k: batch[PATH + k][:, -1] for k in keys}
+
+
 def indicator_ddpg_loss(
     batch: dict[str, Tensor],
     actor: nn.Module,
@@ -259,23 +293,34 @@ def indicator_ddpg_loss(
     goal = select_goals(batch, keys, relabel.source)
     gt_goal = ground_truth_goal(batch, relabel.source)
 
-    if config.reward == "indicator":
-        reward = indicator_reward(next_obs, goal, config.positive_reward, config.negative_reward)
-    else:
-        if gt_goal is None:
+    def step_reward(frames: dict[str, Tensor], gt_achieved: Tensor | None) -> Tensor:
+        """The reward of arriving at ``frames`` with the batch's goals: indicator or oracle."""
+        if config.reward == "indicator":
+            return indicator_reward(frames, goal, config.positive_reward, config.negative_reward)
+        if gt_goal is None or gt_achieved is None:
             raise ValueError(
                 f"reward='oracle' needs ground truth in the batch: {GT_NEXT_ACHIEVED}, {GT_FUTURE_ACHIEVED}, "
-                f"{GT_DESIRED}"
+                f"{GT_DESIRED}" + (f", {GT_PATH_ACHIEVED}" if config.n_step > 1 else "")
             )
-        success = ground_truth_success(batch[GT_NEXT_ACHIEVED], gt_goal, config.oracle_epsilon)
-        reward = torch.where(success, config.positive_reward, config.negative_reward)
+        success = ground_truth_success(gt_achieved, gt_goal, config.oracle_epsilon)
+        return torch.where(success, config.positive_reward, config.negative_reward)
 
-    f = encode_batch(obs, next_obs, goal, relabel.source, actor, critic, target_actor, target_critic, config)
+    reward = step_reward(next_obs, batch.get(GT_NEXT_ACHIEVED))  # r_{t+1}: the filter's and the stats'
+    returns, discount, bootstrap_obs = reward, torch.full_like(reward, config.gamma), next_obs
+    if config.n_step > 1:
+        returns, discount, bootstrap_obs = n_step_return(batch, keys, reward, step_reward, config)
+    # Where the goal is the frame the target bootstraps from, its encoding is shared (encode_batch).
+    goal_is_next = relabel.source == SOURCE_NEXT
+    if config.n_step > 1:
+        goal_is_next = goal_is_next & ~batch[PATH_VALID].any(dim=1)
+    f = encode_batch(
+        obs, bootstrap_obs, goal, goal_is_next, actor, critic, target_actor, target_critic, config
+    )
     q = critic.head(f.critic, action)
     with torch.no_grad():
         next_q = target_critic.head(f.target_critic, target_actor.head(f.target_actor))
         # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
-        target = (reward + config.gamma * next_q).clamp(config.q_min, config.q_max)
+        target = (returns + discount * next_q).clamp(config.q_min, config.q_max)
         keep = (
             valid & filter_keep(reward, q.detach(), config.q0, config.negative_reward)
             if config.filter
@@ -354,6 +399,12 @@ def dataset_batch_to_transitions(
     (B, 2 + n_offsets, ...) with ``<key>_is_pad`` (B, 2 + n_offsets) marking frames past the episode end.
     Index 0 is o_t, 1 is o_{t+1}; the future frame is one *valid* offset picked uniformly per sample.
     """
+    if config.n_step > 1:
+        raise ValueError(
+            f"n_step={config.n_step}: a lerobot-train sample holds o_t, o_{{t+1}} and future frames, not the "
+            "frames in between that an n-step target compares with the goal; train with n_step=1 here, or "
+            "with lerobot-indicator-train (--dataset.* seeds its episode buffer)"
+        )
     first = config.observation_keys[0]
     pad_key = f"{first}_is_pad"
     n_frames = 2 + len(config.future_offsets)

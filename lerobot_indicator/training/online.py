@@ -93,18 +93,26 @@ def to_transition_batch(
         batch[k] = t(sample["obs"][k])
         batch[core.NEXT + k] = t(sample["next_obs"][k])
         batch[core.FUTURE + k] = t(sample["future_obs"][k])
+        if "path_obs" in sample:
+            batch[core.PATH + k] = t(sample["path_obs"][k])
+    if "path_obs" in sample:
+        batch[core.PATH_VALID] = t(sample["path_valid"])
     for k in (k for k in sample["obs"] if k not in batch):
         batch[k] = t(sample["obs"][k])  # the recorded goals
     for k in keys:
         # The buffer packs an observation key and its goal key separately: where one was widened to float32
         # and the other is still uint8, compare and encode both as their float32 values.
-        group = [k, core.NEXT + k, core.FUTURE + k, goal_key(k)]
+        group = [k, core.NEXT + k, core.FUTURE + k, goal_key(k)] + (
+            [core.PATH + k] if "path_obs" in sample else []
+        )
         if len({batch[g].dtype for g in group}) > 1:
             batch.update({g: as_float(batch[g]) for g in group})
     if "gt_next_achieved" in sample:
         batch[core.GT_NEXT_ACHIEVED] = t(sample["gt_next_achieved"])
         batch[core.GT_FUTURE_ACHIEVED] = t(sample["gt_future_achieved"])
         batch[core.GT_DESIRED] = t(sample["gt_desired"])
+    if "gt_path_achieved" in sample:
+        batch[core.GT_PATH_ACHIEVED] = t(sample["gt_path_achieved"])
     return batch
 
 
@@ -324,10 +332,10 @@ class OnlineTrainer:
     def optimise(self, rng: np.random.Generator, generator: torch.Generator) -> dict[str, float]:
         self.policy.train()
         sums: dict[str, float] = {}
+        n_step = self.policy.config.n_step
         for _ in range(self.cfg.online.updates_per_cycle):
-            batch = to_transition_batch(
-                self.buffer.sample(self.batch_size, rng, packed=True), self.keys, self.horizon, self.device
-            )
+            sample = self.buffer.sample(self.batch_size, rng, packed=True, n_step=n_step)
+            batch = to_transition_batch(sample, self.keys, self.horizon, self.device)
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()

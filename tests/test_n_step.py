@@ -150,10 +150,25 @@ def test_replay_path_frames_are_the_next_n_minus_one_clamped_at_the_episode_end(
 def test_n_step_fields_are_checked_and_lerobot_train_batches_refuse_it():
     with pytest.raises(IndicatorDDPGConfigError, match="n_step must be >= 1"):
         make_policy(n_step=0)
-    with pytest.raises(IndicatorDDPGConfigError, match="inverse_dynamics"):
-        make_policy(n_step=3, inverse_dynamics=1.0)
     policy = make_policy(n_step=3)
     frames = torch.zeros(2, 2 + len(policy.config.future_offsets), 1)
     batch = {STATE: frames, GOAL: frames, "action": torch.zeros(2, 1)}
     with pytest.raises(ValueError, match="n_step=3: a lerobot-train sample"):
         core.dataset_batch_to_transitions(batch, policy.config)
+
+
+def test_inverse_dynamics_with_n_step_still_predicts_a_t_from_o_t_and_o_next():
+    """With n-step targets the bootstrap frame is o_{t+n}, but the inverse-dynamics loss must still see
+    (o_t, o_{t+1}): the same weights and frames give the same loss as with one-step targets."""
+    from test_visual_encoder import DEPTH, RGB, policy_and_batch
+
+    losses = {}
+    for n in (1, 3):
+        policy, batch = policy_and_batch(batch_size=8, augment_pad=0, inverse_dynamics=1.0, n_step=n, conv_precision="float32")
+        for k in (RGB, DEPTH):
+            far = torch.roll(batch[core.NEXT + k], 1, dims=0)  # o_{t+2}, o_{t+3}: other frames than o_{t+1}
+            batch[core.PATH + k] = torch.stack([far, torch.roll(far, 1, dims=0)], dim=1)
+        batch[core.PATH_VALID] = torch.ones(8, 2, dtype=torch.bool)
+        _, stats = policy.forward(batch, generator=torch.Generator().manual_seed(0))
+        losses[n] = stats["inverse_dynamics_loss"]
+    assert losses[3] == pytest.approx(losses[1], rel=1e-5)

@@ -214,11 +214,6 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             )
         if self.n_step < 1:
             raise ValueError(f"n_step must be >= 1 (1 = the paper's one-step TD target), got {self.n_step}")
-        if self.n_step > 1 and self.inverse_dynamics > 0:
-            raise ValueError(
-                "inverse_dynamics predicts a_t from (o_t, o_{t+1}), which an n-step update does not encode: "
-                "use one of n_step > 1 and inverse_dynamics > 0"
-            )
         if not 0 <= self.tau <= 1:
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")
         if self.image_encoder not in IMAGE_ENCODERS:

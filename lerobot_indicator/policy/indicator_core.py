@@ -170,6 +170,7 @@ def encode_batch(
     target_actor: nn.Module,
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
+    transition_next: dict[str, Tensor] | None = None,
 ) -> Features:
     """Every network's features, each distinct frame encoded once per encoder.
 
@@ -178,7 +179,8 @@ def encode_batch(
     encoding. With the shared ("drq") encoder one conv pass over o_t, o_{t+1} and the other goals serves all
     four networks: the targets use the online encoder's features of (o_{t+1}, g) without gradients (DrQ-v2),
     or their own EMA encoder (``target_encoder``). Under ``torch.compile`` (static shapes) and for state
-    inputs every goal is encoded, which gives the same values.
+    inputs every goal is encoded, which gives the same values. ``transition_next``: o_{t+1} for the
+    inverse-dynamics features (o_t, o_{t+1}) where ``next_obs`` is another frame, encoded in the same pass.
     """
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
     everyone = torch.arange(goal_is_next.shape[0], device=goal_is_next.device)
@@ -200,7 +202,8 @@ def encode_batch(
         return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
 
     if config.shared_encoder:
-        h_obs, h_next, h_goal = encode_with_next(critic.encoder, [obs])
+        extra = [] if transition_next is None else [transition_next]
+        h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra])
         features = torch.cat([h_obs, h_goal], dim=1)
         target = torch.cat([h_next, h_goal], dim=1).detach()
         if config.target_encoder:
@@ -211,7 +214,7 @@ def encode_batch(
             actor=features.detach(),
             target_critic=target,
             target_actor=target,
-            transition=torch.cat([h_obs, h_next], dim=1),
+            transition=torch.cat([h_obs, h_extra[0] if h_extra else h_next], dim=1),
         )
     with torch.no_grad():
         target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
@@ -313,8 +316,19 @@ def indicator_ddpg_loss(
     goal_is_next = relabel.source == SOURCE_NEXT
     if config.n_step > 1:
         goal_is_next = goal_is_next & ~batch[PATH_VALID].any(dim=1)
+    # The inverse-dynamics features pair o_t with o_{t+1}, which an n-step target does not bootstrap from.
+    transition_next = next_obs if config.n_step > 1 and critic.inverse is not None else None
     f = encode_batch(
-        obs, bootstrap_obs, goal, goal_is_next, actor, critic, target_actor, target_critic, config
+        obs,
+        bootstrap_obs,
+        goal,
+        goal_is_next,
+        actor,
+        critic,
+        target_actor,
+        target_critic,
+        config,
+        transition_next,
     )
     q = critic.head(f.critic, action)
     with torch.no_grad():

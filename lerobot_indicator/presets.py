@@ -51,6 +51,10 @@ VARIANTS["indicator_balance_filter_inverse_dynamics"] = [
     *METHODS["indicator_balance_filter"],
     "--policy.inverse_dynamics=1.0",
 ]
+VARIANTS["indicator_balance_filter_n3_inverse_dynamics"] = [
+    *VARIANTS["indicator_balance_filter_n3"],
+    "--policy.inverse_dynamics=1.0",
+]
 METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
@@ -66,6 +70,7 @@ LABELS = {
     "indicator_n3": "Indicator, 3-step targets",
     "indicator_balance_filter_n3": "Indicator+Balance+Filter, 3-step targets",
     "indicator_balance_filter_inverse_dynamics": "Indicator+Balance+Filter, inverse-dynamics loss",
+    "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -82,6 +87,7 @@ STYLES = {
     "indicator_n3": ("gold", "-"),
     "indicator_balance_filter_n3": ("black", "-"),
     "indicator_balance_filter_inverse_dynamics": ("tab:brown", ":"),
+    "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 

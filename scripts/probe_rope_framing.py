@@ -54,11 +54,7 @@ def main() -> None:
         Framing("tight", tight),
         Framing(f"tight_supersample{args.supersample}", {**tight, **ss}),
     ]
-    result = compare_framings(
-        framings, states, args.size, args.updates, args.batch_size, args.every, args.seed
-    )
-    examples = result.pop("example_frames")
-    result |= {
+    header = {
         "command": shlex.join(["python", *sys.argv]),
         "frames": len(states.states),
         "episodes": args.episodes,
@@ -69,8 +65,15 @@ def main() -> None:
         },  # fmt: skip
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {args.out}")
+
+    def write(results: dict) -> None:
+        args.out.write_text(json.dumps({**header, "framings": results}, indent=2) + "\n")
+        print(f"wrote {args.out}: {json.dumps(results)}", flush=True)
+
+    result = compare_framings(
+        framings, states, args.size, args.updates, args.batch_size, args.every, args.seed, on_update=write
+    )
+    examples = result.pop("example_frames")
     if args.png is not None:
         scale, pad, caption = 3, 6, 18
         px = args.size * scale

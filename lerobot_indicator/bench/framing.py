@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -223,21 +224,28 @@ def compare_framings(
     batch_size: int,
     every: int,
     seed: int,
+    on_update: Callable[[dict], None] | None = None,
 ) -> dict:
-    """Image statistics and the link probe of every framing on the same states; the frames of state 0 of
-    each framing are returned too (for a picture), under ``"example_frames"``."""
-    results, examples = {}, {}
+    """Image statistics of every framing on the same states, then the link probe of each.
+
+    ``on_update`` gets the results so far after each framing's statistics and each probe (so a slow machine
+    keeps what it measured). The frames of state 0 of each framing are returned under ``"example_frames"``.
+    """
+    results, examples, rendered = {}, {}, {}
     for framing in framings:
         t0 = time.perf_counter()
         frames = render_states(framing, states, size)
-        render_s = time.perf_counter() - t0
         results[framing.name] = {
             "camera": {**rope_camera_defaults(), **framing.camera, "width": size, "height": size},
-            "render_s_per_frame": render_s / len(states.states),
+            "render_s_per_frame": (time.perf_counter() - t0) / len(states.states),
             **image_statistics(frames, states, framing.camera),
-            "probe": link_probe(frames, states, updates, batch_size, every, seed),
         }
+        rendered[framing.name] = frames
         examples[framing.name] = frames[RGB][0].transpose(1, 2, 0)
-        print(framing.name, {k: v for k, v in results[framing.name].items() if k not in ("camera", "probe")},
-              "probe error", results[framing.name]["probe"]["final_test_error_m"], flush=True)  # fmt: skip
+        if on_update is not None:
+            on_update(results)
+    for name, frames in rendered.items():
+        results[name]["probe"] = link_probe(frames, states, updates, batch_size, every, seed)
+        if on_update is not None:
+            on_update(results)
     return {"framings": results, "example_frames": examples}

@@ -27,6 +27,12 @@ METHODS: dict[str, list[str]] = {
     ],
 }
 PAPER_METHODS = list(METHODS)
+# The paper's learned-reward baselines (appendix), for image tasks only: an AE / beta-VAE trained jointly
+# with the agent gives the reward; goals are sampled as for the other methods without balancing.
+LEARNED_REWARD_METHODS = {
+    reward: [f"--policy.reward={reward}", "--policy.balance=false", "--policy.filter=false"]
+    for reward in ("ae", "vae")
+}
 # Variants of the paper's methods, each one flag away from it:
 # - the other reading of balancing at t = T-1 (no t' >= t+2): the recorded goal instead of o_{t+1};
 # - image inputs: the paper's encoder instead of the default ("drq", docs/policy.md), and float32 convs.
@@ -55,6 +61,16 @@ VARIANTS["indicator_balance_filter_n3_inverse_dynamics"] = [
     *VARIANTS["indicator_balance_filter_n3"],
     "--policy.inverse_dynamics=1.0",
 ]
+# The filter's options (docs/policy.md): Q from the target critic; filtering only in calibrated batches.
+VARIANTS["indicator_balance_filter_target_q"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.filter_q=target",
+]
+VARIANTS["indicator_balance_filter_calibrated"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.filter_start=calibrated",
+]
+METHODS.update(LEARNED_REWARD_METHODS)
 METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
@@ -71,6 +87,10 @@ LABELS = {
     "indicator_balance_filter_n3": "Indicator+Balance+Filter, 3-step targets",
     "indicator_balance_filter_inverse_dynamics": "Indicator+Balance+Filter, inverse-dynamics loss",
     "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
+    "indicator_balance_filter_target_q": "Indicator+Balance+Filter, filter Q from the target critic",
+    "indicator_balance_filter_calibrated": "Indicator+Balance+Filter, filter once Q is calibrated",
+    "ae": "AE",
+    "vae": "VAE",
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -85,9 +105,13 @@ STYLES = {
     "indicator_balance_filter_fp32": ("tab:pink", ":"),
     "oracle_n3": ("tab:cyan", "-"),
     "indicator_n3": ("gold", "-"),
-    "indicator_balance_filter_n3": ("black", "-"),
+    "indicator_balance_filter_n3": ("darkgreen", "-"),
     "indicator_balance_filter_inverse_dynamics": ("tab:brown", ":"),
     "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
+    "indicator_balance_filter_target_q": ("tab:cyan", "--"),
+    "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
+    "ae": ("black", "-"),
+    "vae": ("black", "--"),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 

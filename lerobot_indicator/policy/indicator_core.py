@@ -31,7 +31,7 @@ import torch
 from torch import Tensor, nn
 
 from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
 from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, tanh
 
 # Transition-batch keys (the table above).
@@ -145,6 +145,20 @@ def filter_keep(reward: Tensor, q: Tensor, q0: float, r_neg: float) -> Tensor:
     return ~((reward == r_neg) & (q > q0))
 
 
+def filter_calibrated(
+    reward: Tensor, q: Tensor, valid: Tensor, q0: float, r_pos: float, fraction: float
+) -> Tensor:
+    """0-d bool: at least ``fraction`` of the batch's valid R+ transitions have Q > q0 (False without any).
+
+    R+ transitions are the relabeled positives (o_g = o_{t+1}, or a future frame equal to it), whose return
+    is high whatever the critic says; Q above q0 on them is the evidence that Q > q0 on an R- transition means
+    "probably reachable" rather than an uncalibrated critic.
+    """
+    positive = (reward == r_pos) & valid
+    above = (positive & (q > q0)).sum()
+    return (positive.sum() > 0) & (above >= fraction * positive.sum())
+
+
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * mask).sum() / mask.sum().clamp_min(1)
 
@@ -158,6 +172,7 @@ class Features:
     target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
     target_actor: Tensor
     transition: Tensor | None = None  # (o_t, o_{t+1}) with gradients, shared encoder only
+    target_critic_obs: Tensor | None = None  # (o_t, g) as the target critic sees it (filter_q="target")
 
 
 def encode_batch(
@@ -201,29 +216,39 @@ def encode_batch(
         *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
         return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
 
+    target_obs = config.filter and config.filter_q == "target"
+
+    def target_critic_features() -> tuple[Tensor, Tensor | None]:
+        """The target critic's (o_{t+1}, g) and, for the filter, (o_t, g), from its own encoder."""
+        with torch.no_grad():
+            *h_obs, h_next, h_goal = encode_with_next(target_critic.encoder, [obs] if target_obs else [])
+        return torch.cat([h_next, h_goal], dim=1), torch.cat([h_obs[0], h_goal], 1) if target_obs else None
+
     if config.shared_encoder:
         extra = [] if transition_next is None else [transition_next]
         h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra])
         features = torch.cat([h_obs, h_goal], dim=1)
         target = torch.cat([h_next, h_goal], dim=1).detach()
+        target_o = features.detach() if target_obs else None
         if config.target_encoder:
-            with torch.no_grad():
-                target = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
+            target, target_o = target_critic_features()
         return Features(
             critic=features,
             actor=features.detach(),
             target_critic=target,
             target_actor=target,
             transition=torch.cat([h_obs, h_extra[0] if h_extra else h_next], dim=1),
+            target_critic_obs=target_o,
         )
+    target_c, target_o = target_critic_features()
     with torch.no_grad():
-        target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
         target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
     return Features(
         critic=critic.encode(obs, goal, shift),
         actor=actor.encode(obs, goal, shift),
         target_critic=target_c,
         target_actor=target_a,
+        target_critic_obs=target_o,
     )
 
 
@@ -272,8 +297,12 @@ def indicator_ddpg_loss(
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
     generator: torch.Generator | None = None,
+    reward_model: nn.Module | None = None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """One DDPG step's loss on a transition batch (module docstring), with relabeling, rewards and filtering.
+
+    ``reward_model`` (``learned_reward.LearnedReward``, for ``reward`` "ae" / "vae") gives the reward from
+    (o_{t+1}, g) and adds its own reconstruction loss on the batch's o_t to the returned loss.
 
     Returns ``critic_loss + actor_loss``: the critic gets gradients only from the TD loss (targets and the
     filter's Q are computed without gradients) and the actor only from -Q(o, g, pi(o, g)) + action_l2 *
@@ -297,9 +326,13 @@ def indicator_ddpg_loss(
     gt_goal = ground_truth_goal(batch, relabel.source)
 
     def step_reward(frames: dict[str, Tensor], gt_achieved: Tensor | None) -> Tensor:
-        """The reward of arriving at ``frames`` with the batch's goals: indicator or oracle."""
+        """The reward of arriving at ``frames`` with the batch's goals: indicator, learned or oracle."""
         if config.reward == "indicator":
             return indicator_reward(frames, goal, config.positive_reward, config.negative_reward)
+        if reward_model is not None:
+            return reward_model.reward(frames, goal)
+        if config.reward != "oracle":
+            raise ValueError(f"reward={config.reward!r} needs the policy's reward_model")
         if gt_goal is None or gt_achieved is None:
             raise ValueError(
                 f"reward='oracle' needs ground truth in the batch: {GT_NEXT_ACHIEVED}, {GT_FUTURE_ACHIEVED}, "
@@ -335,11 +368,18 @@ def indicator_ddpg_loss(
         next_q = target_critic.head(f.target_critic, target_actor.head(f.target_actor))
         # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
         target = (returns + discount * next_q).clamp(config.q_min, config.q_max)
-        keep = (
-            valid & filter_keep(reward, q.detach(), config.q0, config.negative_reward)
-            if config.filter
-            else valid
-        )
+        keep, filter_on = valid, None
+        if config.filter:
+            q_filter = (
+                q.detach() if f.target_critic_obs is None else target_critic.head(f.target_critic_obs, action)
+            )
+            drop = ~filter_keep(reward, q_filter, config.q0, config.negative_reward)
+            if config.filter_start == "calibrated":
+                filter_on = filter_calibrated(
+                    reward, q_filter, valid, config.q0, config.positive_reward, config.filter_calibration
+                )
+                drop = drop & filter_on
+            keep = valid & ~drop
     keep_f = keep.to(q.dtype)
     critic_loss = masked_mean((q - target) ** 2, keep_f)
 
@@ -354,7 +394,7 @@ def indicator_ddpg_loss(
         predicted = tanh(critic.inverse(f.transition))
         inverse_loss = masked_mean(((predicted - action) ** 2).mean(dim=1), valid_f)
         loss = loss + config.inverse_dynamics * inverse_loss
-    positive = (reward == config.positive_reward).float()
+    positive = (reward >= config.reward_positive_threshold).float()
     stats = {
         "critic_loss": critic_loss.detach(),
         "actor_loss": actor_loss.detach(),
@@ -368,6 +408,12 @@ def indicator_ddpg_loss(
     }
     if inverse_loss is not None:
         stats["inverse_dynamics_loss"] = inverse_loss.detach()
+    if filter_on is not None:
+        stats["filter_active"] = filter_on.float()
+    if reward_model is not None:
+        model_loss, model_stats = reward_model.loss(obs)
+        loss = loss + model_loss
+        stats |= model_stats | {"reward_mean": masked_mean(reward, valid_f)}
     if gt_goal is not None:
         stats |= reward_statistics(reward, batch[GT_NEXT_ACHIEVED], gt_goal, keep, valid, config)
     return loss, stats
@@ -390,11 +436,21 @@ def reward_statistics(
     """
     gt_pos = ground_truth_success(gt_next, gt_goal, config.oracle_epsilon) & valid
     gt_neg = ~gt_pos & valid
-    pos = (reward == config.positive_reward) & valid
+    pos = (reward >= config.reward_positive_threshold) & valid
     neg = ~pos & valid
     kept_gt_pos = gt_pos & keep
     filtered = valid & ~keep
-    return {
+    ranking = {}
+    if config.reward in LEARNED_REWARDS:
+        # P(r(ground-truth positive) > r(ground-truth negative)) over the batch's pairs, ties half: how well
+        # the learned reward ranks, independent of the threshold (0.5 = no better than chance or no pairs).
+        pairs = gt_pos[:, None] & gt_neg[None, :]
+        order = (reward[:, None] > reward[None, :]).float() + 0.5 * (
+            reward[:, None] == reward[None, :]
+        ).float()
+        n_pairs = pairs.sum()
+        ranking["reward_auc"] = torch.where(n_pairs > 0, (order * pairs).sum() / n_pairs.clamp_min(1), 0.5)
+    return ranking | {
         "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()),
         "false_negative_rate": (neg & gt_pos).sum() / gt_pos.sum().clamp_min(1),
         "false_positive_rate": (pos & gt_neg).sum() / gt_neg.sum().clamp_min(1),

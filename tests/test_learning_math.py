@@ -15,7 +15,7 @@ from torch import nn
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
-from lerobot_indicator.training.online import to_transition_batch
+from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 
 STATE, GOAL = "observation.state", "observation.goal_state"

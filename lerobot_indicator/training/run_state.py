@@ -40,11 +40,11 @@ CHUNK_ACTIONS, CHUNK_GT_ACHIEVED, CHUNK_GT_DESIRED = "actions", "gt_achieved", "
 class Progress:
     """Counters saved with the resume state."""
 
-    cycle: int = 0
-    step: int = 0
-    env_steps: int = 0
-    episodes: int = 0
-    wall_time_s: float = 0.0
+    cycle: int = 0  # cycles completed
+    step: int = 0  # optimisation steps done
+    env_steps: int = 0  # env steps of the collected episodes
+    episodes: int = 0  # episodes added to the replay buffer, seeded ones included
+    wall_time_s: float = 0.0  # of the completed cycles, evaluation included
     seeded_episodes: int = 0  # from --dataset, before any rollout
     recorded_episodes: int = 0  # in the --record dataset's last checkpoint when this state was saved
     # False when training a --policy.path policy, which keeps its own input normalisation (a resumed run

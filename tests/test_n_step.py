@@ -25,7 +25,7 @@ from test_learning_math import (
 
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfigError
-from lerobot_indicator.training.online import to_transition_batch
+from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 
 GAMMA = (T - 1) / T
@@ -164,7 +164,9 @@ def test_inverse_dynamics_with_n_step_still_predicts_a_t_from_o_t_and_o_next():
 
     losses = {}
     for n in (1, 3):
-        policy, batch = policy_and_batch(batch_size=8, augment_pad=0, inverse_dynamics=1.0, n_step=n, conv_precision="float32")
+        policy, batch = policy_and_batch(
+            batch_size=8, augment_pad=0, inverse_dynamics=1.0, n_step=n, conv_precision="float32"
+        )
         for k in (RGB, DEPTH):
             far = torch.roll(batch[core.NEXT + k], 1, dims=0)  # o_{t+2}, o_{t+3}: other frames than o_{t+1}
             batch[core.PATH + k] = torch.stack([far, torch.roll(far, 1, dims=0)], dim=1)

@@ -18,24 +18,31 @@ import torch
 
 from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy, rgbd_features
 from lerobot_indicator.keys import goal_key
-from lerobot_indicator.training.online import add_replay_chunk, to_transition_batch
+from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
+from lerobot_indicator.training.run_state import (
+    CHUNK_ACTIONS,
+    CHUNK_GT_ACHIEVED,
+    CHUNK_GT_DESIRED,
+    REPLAY_DIR,
+    add_replay_chunk,
+)
 
 
 def load_chunks(run_dir: Path, horizon: int, inputs: str, max_chunks: int) -> EpisodeReplayBuffer:
-    files = sorted((run_dir / "replay").glob("cycle_*.npz"))[:max_chunks]
+    files = sorted((run_dir / REPLAY_DIR).glob("cycle_*.npz"))[:max_chunks]
     if not files:
-        raise FileNotFoundError(f"{run_dir}/replay has no cycle_*.npz episode chunks")
+        raise FileNotFoundError(f"{run_dir}/{REPLAY_DIR} has no cycle_*.npz episode chunks")
     buffer = EpisodeReplayBuffer(10**6, horizon)
     for path in files:
         with np.load(path) as z:
             chunk = dict(z)
         if inputs == "state":
-            goal = np.repeat(chunk["gt_desired"][:, None], chunk["gt_achieved"].shape[1], axis=1)
+            goal = np.repeat(chunk[CHUNK_GT_DESIRED][:, None], chunk[CHUNK_GT_ACHIEVED].shape[1], axis=1)
             chunk = {
-                "obs/observation.state": chunk["gt_achieved"],
+                "obs/observation.state": chunk[CHUNK_GT_ACHIEVED],
                 "obs/observation.goal_state": goal,
-                **{k: chunk[k] for k in ("actions", "gt_achieved", "gt_desired")},
+                **{k: chunk[k] for k in (CHUNK_ACTIONS, CHUNK_GT_ACHIEVED, CHUNK_GT_DESIRED)},
             }
         add_replay_chunk(buffer, chunk)
     return buffer

@@ -32,7 +32,7 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, tanh
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames
 
 # Transition-batch keys (the table above).
 ACTION = "action"
@@ -391,7 +391,7 @@ def indicator_ddpg_loss(
     loss = critic_loss + actor_loss
     inverse_loss = None
     if critic.inverse is not None and f.transition is not None:
-        predicted = tanh(critic.inverse(f.transition))
+        predicted = torch.tanh(critic.inverse(f.transition))
         inverse_loss = masked_mean(((predicted - action) ** 2).mean(dim=1), valid_f)
         loss = loss + config.inverse_dynamics * inverse_loss
     positive = (reward >= config.reward_positive_threshold).float()

@@ -166,6 +166,13 @@ class EpisodeReplayBuffer:
         self.num_episodes = min(self.num_episodes + 1, self.capacity)
         self.total_episodes_added += 1
 
+    def start_at(self, total_episodes: int) -> None:
+        """Continue as if ``total_episodes`` had been added (the FIFO evicted them), so the next added episode
+        lands in the slot it had in the run that added them: how a resumed run rebuilds an evicted buffer."""
+        self.total_episodes_added = total_episodes
+        self.next_slot = total_episodes % self.capacity
+        self.num_episodes = min(total_episodes, self.capacity)
+
     def sample(
         self, batch_size: int, rng: np.random.Generator, packed: bool = False, n_step: int = 1
     ) -> dict:

@@ -27,8 +27,9 @@ import torch
 
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
-from lerobot_indicator.training.online import REPLAY_DIR, RESUME_DIR, add_replay_chunk, to_transition_batch
+from lerobot_indicator.training.online import REPLAY_DIR, RESUME_DIR, add_replay_chunk
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
+from lerobot_indicator.training.transition_batch import to_transition_batch
 
 SOURCES = {core.SOURCE_NEXT: "next", core.SOURCE_FUTURE: "future", core.SOURCE_RECORDED: "recorded"}
 

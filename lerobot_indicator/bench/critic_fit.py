@@ -17,8 +17,9 @@ import numpy as np
 import torch
 
 from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy, rgbd_features
-from lerobot_indicator.training.online import add_replay_chunk, to_transition_batch
+from lerobot_indicator.training.online import add_replay_chunk
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
+from lerobot_indicator.training.transition_batch import to_transition_batch
 
 
 def load_chunks(run_dir: Path, horizon: int, inputs: str, max_chunks: int) -> EpisodeReplayBuffer:

@@ -34,14 +34,13 @@ from tqdm import tqdm
 
 from lerobot_indicator.data.checkpoint import clear_checkpoint, write_checkpoint
 from lerobot_indicator.finite import NonFiniteError, check_module
-from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
-from lerobot_indicator.policy import indicator_core as core
-from lerobot_indicator.policy.networks_indicator_ddpg import as_float
+from lerobot_indicator.keys import EVAL_SEED_OFFSET
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import Processors, Rollouts, run_episodes, stored_keys
+from lerobot_indicator.training.transition_batch import to_transition_batch
 
 METRICS_FILE = "metrics.jsonl"
 RESUME_DIR = "resume"
@@ -68,44 +67,6 @@ class Progress:
 
 def cycle_seed(seed: int, cycle: int) -> int:
     return (seed * 1_000_003 + cycle) % (2**63)
-
-
-def to_transition_batch(
-    sample: dict, keys: list[str], horizon: int, device: torch.device
-) -> dict[str, torch.Tensor]:
-    """Replay-buffer sample -> the learning core's transition batch (``indicator_core`` docstring).
-
-    ``future.count`` = |{t+2..T}| lets the unbalanced (HER-style) mode pick o_{t+1} with the right
-    probability, so its future goal is uniform over {t+1..T}."""
-
-    def t(x: np.ndarray) -> torch.Tensor:
-        x = torch.from_numpy(np.ascontiguousarray(x)).to(device)
-        # uint8 frames stay uint8 (the networks convert them); torch has few uint16 kernels, so packed depth
-        # becomes its float32 value here.
-        return x.float() if x.dtype == torch.uint16 else x
-
-    batch = {
-        core.ACTION: t(sample["action"]),
-        core.HAS_FUTURE: t(sample["has_future"]),
-        core.FUTURE_COUNT: t(np.maximum(horizon - sample["t"] - 1, 0)),
-    }
-    for k in keys:
-        batch[k] = t(sample["obs"][k])
-        batch[core.NEXT + k] = t(sample["next_obs"][k])
-        batch[core.FUTURE + k] = t(sample["future_obs"][k])
-    for k in (k for k in sample["obs"] if k not in batch):
-        batch[k] = t(sample["obs"][k])  # the recorded goals
-    for k in keys:
-        # The buffer packs an observation key and its goal key separately: where one was widened to float32
-        # and the other is still uint8, compare and encode both as their float32 values.
-        group = [k, core.NEXT + k, core.FUTURE + k, goal_key(k)]
-        if len({batch[g].dtype for g in group}) > 1:
-            batch.update({g: as_float(batch[g]) for g in group})
-    if "gt_next_achieved" in sample:
-        batch[core.GT_NEXT_ACHIEVED] = t(sample["gt_next_achieved"])
-        batch[core.GT_FUTURE_ACHIEVED] = t(sample["gt_future_achieved"])
-        batch[core.GT_DESIRED] = t(sample["gt_desired"])
-    return batch
 
 
 def add_replay_chunk(buffer: EpisodeReplayBuffer, chunk: dict[str, np.ndarray]) -> None:

@@ -41,7 +41,7 @@ from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
-from lerobot_indicator.training.rollout import Processors, Rollouts, run_episodes, stored_keys
+from lerobot_indicator.training.rollout import EpisodeBatch, Processors, Rollouts, run_episodes, stored_keys
 
 METRICS_FILE = "metrics.jsonl"
 RESUME_DIR = "resume"
@@ -155,6 +155,11 @@ class OnlineTrainer:
         self.n_cycles = math.ceil(cfg.steps / o.updates_per_cycle)
         self.rounds_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs)
         self.dataset = self._open_record_dataset() if cfg.record.repo_id else None
+        self.ray_rollouts = None
+        if o.backend == "ray":
+            from lerobot_indicator.training.ray_rollouts import RayRollouts
+
+            self.ray_rollouts = RayRollouts(cfg, o.num_workers, o.ray_address)
         self.wandb = None
         if cfg.wandb.enable and cfg.wandb.project:
             from lerobot.common.wandb_utils import WandBLogger
@@ -296,21 +301,25 @@ class OnlineTrainer:
             seeds=seeds, explore=explore, **kwargs,
         )  # fmt: skip
 
-    def collect(self, cycle: int, generator: torch.Generator, warmup: bool) -> list[Rollouts]:
-        """Behaviour-policy episodes; seeds from (seed, cycle), so a resumed run replays them exactly."""
+    def collect(self, cycle: int, warmup: bool) -> list[Rollouts]:
+        """Behaviour-policy episodes; seeds from (seed, cycle, episode index), so a resumed run replays them
+        exactly and the Ray backend collects the same episodes as the local one."""
         n = self.cfg.online.n_envs
-        rollouts = []
-        for r in range(self.rounds_per_cycle):
-            base = cycle_seed(self.cfg.seed, cycle) % 10**8 * 64 + r * n
-            seeds = [base + i for i in range(n)]
-            random_eps = 1.0 if warmup else None
-            rollouts.append(
-                self._episodes(
-                    seeds, True, generator=generator, random_eps=random_eps,
-                    keep_dataset_frames=self.dataset is not None,
-                )
-            )  # fmt: skip
-        return rollouts
+        base = cycle_seed(self.cfg.seed, cycle) % 10**8 * 64
+        batches = [
+            EpisodeBatch(
+                seeds=tuple(base + r * n + i for i in range(n)), explore=True,
+                generator_seed=cycle_seed(base + r * n, 1), random_eps=1.0 if warmup else None,
+                keep_dataset_frames=self.dataset is not None,
+            )
+            for r in range(self.rounds_per_cycle)
+        ]  # fmt: skip
+        if self.ray_rollouts is not None:
+            return self.ray_rollouts.collect(batches, self.policy)
+        return [
+            b.run(self.vec_env, self.policy, self.processors, stored_keys(self.keys), self.horizon)
+            for b in batches
+        ]
 
     def evaluate(self) -> dict[str, float]:
         """Deterministic actor on a fixed set of goals (the same at every evaluation)."""
@@ -366,7 +375,7 @@ class OnlineTrainer:
                 t0, cycle = time.perf_counter(), self.progress.cycle
                 rng, generator = self._cycle_randomness(cycle)
                 rollouts = self.collect(
-                    cycle, generator, warmup=self.progress.episodes < self.cfg.online.warmup_episodes
+                    cycle, warmup=self.progress.episodes < self.cfg.online.warmup_episodes
                 )
                 self.store(rollouts)
                 stats = self.optimise(rng, generator)  # relabel -> indicator reward -> filter -> DDPG update
@@ -495,6 +504,8 @@ class OnlineTrainer:
 
             wandb.finish()
         close_envs({self.cfg.env.type: {0: self.vec_env}})
+        if self.ray_rollouts is not None:
+            self.ray_rollouts.close()
 
 
 @parser.wrap()

@@ -18,7 +18,11 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-RGBD = ["--env.type=sawyer_reach", "--env.obs_type=rgbd", "--env.light_render=true"]
+
+def env(obs_type: str) -> list[str]:
+    return ["--env.type=sawyer_reach", f"--env.obs_type={obs_type}", "--env.light_render=true"]
+
+
 POLICY = ["--policy.type=indicator_ddpg", "--policy.push_to_hub=false", "--policy.device=cpu"]
 LOCAL_ENV = ["--online.n_envs=1", "--online.use_async_envs=false", "--online.eval_episodes=1"]
 
@@ -41,21 +45,22 @@ def main() -> None:
     p.add_argument("--updates_per_cycle", type=int, default=20)
     p.add_argument("--cycles", type=int, default=3)
     p.add_argument("--batch_size", type=int, default=128)
+    p.add_argument("--obs_type", default="rgbd", choices=["state", "rgb", "rgbd"])
     a = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if a.what == "rollouts":
             px = a.px or 64
-            args = [*RGBD, *size(px), *POLICY, *LOCAL_ENV]
+            args = [*env(a.obs_type), *size(px), *POLICY, *LOCAL_ENV]
             result = scaling.rollout_throughput(args, [1, 2], a.batches_per_worker, a.repeats, tmp / "run")
         elif a.what == "wire":
             px = a.px or 100
-            args = [*RGBD, *size(px), *POLICY, *LOCAL_ENV]
+            args = [*env(a.obs_type), *size(px), *POLICY, *LOCAL_ENV]
             result = scaling.bytes_per_episode(args, tmp / "run")
         else:
             px = a.px or 64
             args = [
-                *RGBD, *size(px), *POLICY, *LOCAL_ENV, "--online.num_workers=2", "--online.episodes_per_cycle=2",
+                *env(a.obs_type), *size(px), *POLICY, *LOCAL_ENV, "--online.num_workers=2", "--online.episodes_per_cycle=2",
                 f"--online.updates_per_cycle={a.updates_per_cycle}", f"--online.batch_size={a.batch_size}",
                 f"--steps={a.updates_per_cycle * a.cycles}", "--env_eval_freq=0", "--save_checkpoint=false",
             ]  # fmt: skip

@@ -64,7 +64,7 @@ def rollout_throughput(
     cfg = make_config(args, out)
     trainer = OnlineTrainer(cfg)  # the learner's policy, as the trainer builds it
     # One logical CPU per actor of every pool: the idle pool's actors wait while the other one collects.
-    ray.init(num_cpus=sum(workers), include_dashboard=False, log_to_driver=False)
+    ray.init(address="local", num_cpus=sum(workers), include_dashboard=False, log_to_driver=False)
     n_envs, horizon = cfg.online.n_envs, trainer.horizon
     before = machine()
     pools = {n: RayRollouts(cfg, n) for n in workers}

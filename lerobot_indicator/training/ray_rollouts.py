@@ -108,8 +108,8 @@ class RolloutWorker:
 
 
 class RayRollouts:
-    """``num_workers`` rollout actors on the Ray cluster at ``address`` (None: a local one on this machine,
-    or the cluster this process is already connected to)."""
+    """``num_workers`` rollout actors on the Ray cluster at ``address`` (None: a new local one on this
+    machine's cores), or on the cluster this process is already connected to."""
 
     def __init__(self, cfg, num_workers: int, address: str | None = None):
         try:
@@ -121,7 +121,8 @@ class RayRollouts:
 
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
-            ray.init(address=address, include_dashboard=False, logging_level=logging.WARNING)
+            # "local": a new instance even where another Ray cluster runs on this machine.
+            ray.init(address=address or "local", include_dashboard=False, logging_level=logging.WARNING)
         self.cfg = cfg
         self.actor_class = ray.remote(num_cpus=1, max_restarts=0)(RolloutWorker)
         self.workers = [self._spawn() for _ in range(num_workers)]

@@ -45,6 +45,7 @@ def main() -> None:
     p.add_argument("--updates_per_cycle", type=int, default=20)
     p.add_argument("--cycles", type=int, default=3)
     p.add_argument("--batch_size", type=int, default=128)
+    p.add_argument("--nice", type=int, default=0, help="priority of the work; Ray's control plane keeps ours")
     p.add_argument("--obs_type", default="rgbd", choices=["state", "rgb", "rgbd"])
     a = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -52,10 +53,13 @@ def main() -> None:
         if a.what == "rollouts":
             px = a.px or 64
             args = [*env(a.obs_type), *size(px), *POLICY, *LOCAL_ENV]
-            result = scaling.rollout_throughput(args, [1, 2], a.batches_per_worker, a.repeats, tmp / "run")
+            result = scaling.rollout_throughput(
+                args, [1, 2], a.batches_per_worker, a.repeats, tmp / "run", a.nice
+            )
         elif a.what == "wire":
             px = a.px or 100
             args = [*env(a.obs_type), *size(px), *POLICY, *LOCAL_ENV]
+            scaling.lower_priority(a.nice)
             result = scaling.bytes_per_episode(args, tmp / "run")
         else:
             px = a.px or 64
@@ -64,7 +68,7 @@ def main() -> None:
                 f"--online.updates_per_cycle={a.updates_per_cycle}", f"--online.batch_size={a.batch_size}",
                 f"--steps={a.updates_per_cycle * a.cycles}", "--env_eval_freq=0", "--save_checkpoint=false",
             ]  # fmt: skip
-            result = scaling.learner_updates(args, ["local", "ray"], a.repeats, tmp)
+            result = scaling.learner_updates(args, ["local", "ray"], a.repeats, tmp, a.nice)
     result = {
         "command": f"scripts/bench_scaling.py {a.what} "
         + " ".join(f"--{k}={v}" for k, v in vars(a).items() if k not in ("what", "out")),

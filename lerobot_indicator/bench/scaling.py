@@ -31,6 +31,36 @@ def machine() -> dict:
     return {"cpu_model": model, "cpu_count": os.cpu_count(), "loadavg": list(os.getloadavg())}
 
 
+WORKER_NICE_ENV = "LEROBOT_INDICATOR_BENCH_NICE"
+
+
+def lower_priority(nice: int) -> None:
+    """``os.nice`` up to ``nice``."""
+    os.nice(max(0, nice - os.nice(0)))
+
+
+def lower_worker_priority() -> None:
+    """Ray ``worker_process_setup_hook``: every Ray worker to the driver's ``WORKER_NICE_ENV`` priority."""
+    lower_priority(int(os.environ.get(WORKER_NICE_ENV, "0")))
+
+
+def start_ray(num_cpus: int, nice: int) -> None:
+    """A local Ray instance whose control plane (GCS, raylet) keeps this process's priority while every
+    process doing the work (this driver, the rollout actors) runs at ``nice``. On a machine whose cores other
+    jobs keep busy, a niced raylet misses Ray's fixed 30 s start-up deadline."""
+    import ray
+
+    os.environ[WORKER_NICE_ENV] = str(nice)  # inherited by the raylet and so by its workers
+    ray.init(
+        address="local",
+        num_cpus=num_cpus,
+        include_dashboard=False,
+        log_to_driver=False,
+        runtime_env={"worker_process_setup_hook": f"{__name__}.lower_worker_priority"},
+    )
+    lower_priority(nice)
+
+
 def make_config(args: list[str], output_dir: Path) -> OnlineTrainConfig:
     from lerobot.utils.import_utils import register_third_party_plugins
 
@@ -50,7 +80,7 @@ def batches(n_batches: int, n_envs: int, first_seed: int) -> list[EpisodeBatch]:
 
 
 def rollout_throughput(
-    args: list[str], workers: list[int], batches_per_worker: int, repeats: int, out: Path
+    args: list[str], workers: list[int], batches_per_worker: int, repeats: int, out: Path, nice: int = 0
 ) -> dict:
     """Env steps/s of ``RayRollouts`` with each worker count, measured in alternation ``repeats`` times.
 
@@ -61,10 +91,10 @@ def rollout_throughput(
     from lerobot_indicator.training.online import OnlineTrainer
     from lerobot_indicator.training.ray_rollouts import RayRollouts
 
+    # One logical CPU per actor of every pool: the idle pool's actors wait while the other one collects.
+    start_ray(sum(workers), nice)
     cfg = make_config(args, out)
     trainer = OnlineTrainer(cfg)  # the learner's policy, as the trainer builds it
-    # One logical CPU per actor of every pool: the idle pool's actors wait while the other one collects.
-    ray.init(address="local", num_cpus=sum(workers), include_dashboard=False, log_to_driver=False)
     n_envs, horizon = cfg.online.n_envs, trainer.horizon
     before = machine()
     pools = {n: RayRollouts(cfg, n) for n in workers}
@@ -139,13 +169,16 @@ def bytes_per_episode(args: list[str], out: Path) -> dict:
         trainer.close()
 
 
-def learner_updates(args: list[str], backends: list[str], repeats: int, out: Path) -> dict:
+def learner_updates(args: list[str], backends: list[str], repeats: int, out: Path, nice: int = 0) -> dict:
     """Optimisation steps per second of wall time in ``OnlineTrainer.optimise``, per backend, in alternating
     short runs of the real trainer (``train()``); also whole-cycle rates (collection included)."""
     import ray
 
     from lerobot_indicator.training.online import OnlineTrainer
 
+    if "ray" in backends:
+        start_ray(2, nice)  # the trainers' pools use it (RayRollouts joins a running instance)
+    lower_priority(nice)
     before = machine()
     rates: dict[str, list[float]] = {b: [] for b in backends}
     cycle_rates: dict[str, list[float]] = {b: [] for b in backends}

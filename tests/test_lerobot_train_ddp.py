@@ -80,3 +80,21 @@ def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
     info = json.loads((eval_dir / "eval_info.json").read_text())
     assert info["overall"]["n_episodes"] == 1
+
+
+def test_loss_curve_benchmark_reads_lerobot_train_log_lines():
+    from lerobot_indicator.bench.ddp_loss import parse_losses, window_means
+
+    log = (
+        "INFO ot_train.py:641 step:2 smpl:16 ep:2 epch:0.76 loss:7.938 grdn:2.835 lr:1.0e-03 updt_s:0.042 "
+        "data_s:0.126 smp/s:47 critic_loss:2.010 actor_loss:5.928 q_mean:-5.922\n"
+        "INFO ot_train.py:641 step:1 smpl:8 ep:1 epch:0.38 loss:9.473 grdn:4.797 lr:1.0e-03 updt_s:0.039 "
+        "data_s:0.265 smp/s:26 critic_loss:3.482 actor_loss:5.991 q_mean:-5.966\n"
+    )
+    assert parse_losses(log) == {
+        "step": [1, 2],
+        "loss": [9.473, 7.938],
+        "critic_loss": [3.482, 2.010],
+        "actor_loss": [5.991, 5.928],
+    }
+    assert window_means([1.0, 3.0, 5.0, 7.0, 9.0], 2) == [2.0, 6.0]

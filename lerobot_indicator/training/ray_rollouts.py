@@ -160,7 +160,10 @@ class RayRollouts:
     def gather(self) -> list[Rollouts]:
         """Wait for every batch, replacing workers that die and giving their batch to the replacement."""
         import ray
-        from ray.exceptions import RayActorError
+        from ray.exceptions import NodeDiedError, OutOfMemoryError, RayActorError, WorkerCrashedError
+
+        # How a dead worker shows on its call: killed, crashed, killed by Ray's memory monitor, node lost.
+        died = (RayActorError, WorkerCrashedError, OutOfMemoryError, NodeDiedError)
 
         budget = MAX_REPLACEMENTS_PER_WORKER * len(self.workers)
         while self._pending:
@@ -168,7 +171,7 @@ class RayRollouts:
             i, w = self._pending.pop(ref)
             try:
                 self._results[i] = ray.get(ref)
-            except RayActorError as e:
+            except died as e:
                 if budget == 0:
                     raise RuntimeError(
                         f"Ray rollout workers died {MAX_REPLACEMENTS_PER_WORKER * len(self.workers)} times in "

@@ -121,6 +121,9 @@ def rollout_throughput(
             "horizon": horizon,
             "batches_per_worker": batches_per_worker,
             "repeats": repeats,
+            # Workers replaced (killed by Ray's memory monitor, crashed): a timed collection that includes a
+            # replacement includes its start-up.
+            "worker_replacements": {str(n): pool.replacements for n, pool in pools.items()},
         }
     finally:
         for pool in pools.values():

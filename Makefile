@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml Makefile
 	  echo "creating $(VENV) with $$python"; rm -rf $(VENV); "$$python" -m venv $(VENV) || exit 1; \
 	fi
 	$(PY) -m pip install -q --disable-pip-version-check --upgrade pip
-	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
+	$(PY) -m pip install -q --disable-pip-version-check -e '.[dev,distributed]'
 	$(PY) -m pip install -q --disable-pip-version-check --no-deps $(ROBOSUITE)
 	@touch $(STAMP)
 

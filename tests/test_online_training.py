@@ -268,6 +268,8 @@ def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoi
         ("--online.input_stats=frozen", "--online.input_stats must be one of"),
         ("--online.episodes_per_cycle=0", "--online.episodes_per_cycle must be >= 1"),
         ("--record.checkpoint_every_s=-1", "--record.checkpoint_every_s must be >= 0"),
+        ("--online.backend=mpi", "--online.backend must be one of \\('local', 'ray'\\), got 'mpi'"),
+        ("--online.num_workers=0", "--online.num_workers must be >= 1, got 0"),
     ],
 )
 def test_config_errors_name_the_bad_option(tmp_path, arg, message):

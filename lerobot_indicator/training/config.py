@@ -15,6 +15,7 @@ from lerobot.utils.hub import HubMixin
 
 TRAIN_CONFIG_NAME = "train_config.json"
 INPUT_STATS = ("running", "first_cycle")
+BACKENDS = ("local", "ray")
 
 
 @dataclass
@@ -41,6 +42,13 @@ class OnlineConfig:
     # after the first cycle (a few episodes' narrow stats clip goals outside their range, so the networks
     # cannot tell those goals apart: docs/results/README.md). A --policy.path policy keeps its own stats.
     input_stats: str = "running"
+    # Where training episodes are collected: "local" = this process's vector env; "ray" = num_workers Ray
+    # actors, each with its own n_envs sub-envs and a CPU copy of the actor (docs/scaling.md; needs the
+    # [distributed] extra). ray_address: an existing cluster ("auto", "host:6379", "ray://host:10001");
+    # None = a local Ray instance on this machine. Evaluation episodes stay local.
+    backend: str = "local"
+    num_workers: int = 2
+    ray_address: str | None = None
 
 
 @dataclass
@@ -104,6 +112,10 @@ class OnlineTrainConfig(HubMixin):
                 f"--online.episodes_per_cycle must be >= 1, or 0 with a --dataset.* to train on offline only, "
                 f"got {o.episodes_per_cycle}"
             )
+        if o.backend not in BACKENDS:
+            raise ValueError(f"--online.backend must be one of {BACKENDS}, got {o.backend!r}")
+        if o.num_workers < 1:
+            raise ValueError(f"--online.num_workers must be >= 1, got {o.num_workers}")
         if o.input_stats not in INPUT_STATS:
             raise ValueError(f"--online.input_stats must be one of {INPUT_STATS}, got {o.input_stats!r}")
         if self.record.checkpoint_every_s < 0:

@@ -39,7 +39,7 @@ from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.recording import RolloutRecorder
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
-from lerobot_indicator.training.rollout import Processors, Rollouts, run_episodes, stored_keys
+from lerobot_indicator.training.rollout import EpisodeBatch, Processors, Rollouts, run_episodes, stored_keys
 from lerobot_indicator.training.run_state import METRICS_FILE, Progress, RunPersistence
 
 
@@ -92,6 +92,11 @@ class OnlineTrainer:
         self.episodes_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs) * o.n_envs
         recorder = RolloutRecorder(cfg, self.vec_env, self.keys) if cfg.record.repo_id else None
         self.persistence = RunPersistence(self.out, recorder)
+        self.ray_rollouts = None
+        if o.backend == "ray":
+            from lerobot_indicator.training.ray_rollouts import RayRollouts
+
+            self.ray_rollouts = RayRollouts(cfg, o.num_workers, o.ray_address)
         self.wandb = None
         if cfg.wandb.enable and cfg.wandb.project:
             from lerobot.common.wandb_utils import WandBLogger
@@ -111,7 +116,7 @@ class OnlineTrainer:
                 if self.hooks.on_cycle_start is not None:
                     self.hooks.on_cycle_start(cycle)
                 # Behaviour-policy episodes (random actions during the warm-up).
-                rollouts = self.collect(cycle, generator)
+                rollouts = self.collect(cycle)
                 # Into the replay buffer, its on-disk chunks and the --record dataset; input statistics.
                 self.store(rollouts)
                 # Relabel -> indicator reward -> filter -> DDPG update, by the learning core.
@@ -151,12 +156,27 @@ class OnlineTrainer:
             for i in range(0, len(seeds), n)
         ]  # fmt: skip
 
-    def collect(self, cycle: int, generator: torch.Generator) -> list[Rollouts]:
-        """The cycle's behaviour-policy episodes, from seeds of (seed, cycle)."""
+    def collect(self, cycle: int) -> list[Rollouts]:
+        """The cycle's behaviour-policy episodes, from seeds of (seed, cycle), so a resumed run replays them;
+        each batch of ``n_envs`` explores with a generator of its own (``EpisodeBatch``), so the Ray backend
+        (``--online.backend=ray``) collects the same episodes as the local one."""
         t0 = time.perf_counter()
         warmup = self.progress.episodes < self.cfg.online.warmup_episodes
-        seeds = cycle_episode_seeds(self.cfg.seed, cycle, self.episodes_per_cycle)
-        rollouts = self.collect_episodes(seeds, True, generator, random_eps=1.0 if warmup else None)
+        seeds, n = cycle_episode_seeds(self.cfg.seed, cycle, self.episodes_per_cycle), self.cfg.online.n_envs
+        batches = [
+            EpisodeBatch(
+                seeds=tuple(seeds[i : i + n]), explore=True, generator_seed=cycle_seed(seeds[i], 1),
+                random_eps=1.0 if warmup else None, keep_dataset_frames=self.persistence.keeps_dataset_frames,
+            )
+            for i in range(0, len(seeds), n)
+        ]  # fmt: skip
+        if self.ray_rollouts is not None:
+            rollouts = self.ray_rollouts.collect(batches, self.policy)
+        else:
+            keys = stored_keys(self.keys)
+            rollouts = [
+                b.run(self.vec_env, self.policy, self.processors, keys, self.horizon) for b in batches
+            ]
         self._phase_end(self.hooks.on_collect_end, t0, rollouts)
         return rollouts
 
@@ -321,6 +341,10 @@ class OnlineTrainer:
 
             wandb.finish()
         close_envs({self.cfg.env.type: {0: self.vec_env}})
+        if self.ray_rollouts is not None:
+            self.ray_rollouts.close()
+        if self.ray_rollouts is not None:
+            self.ray_rollouts.close()
 
 
 def train_metrics(rollouts: list[Rollouts]) -> dict[str, float]:

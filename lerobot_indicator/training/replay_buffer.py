@@ -28,13 +28,13 @@ Arrays = dict[str, np.ndarray]
 _PACKINGS = ((np.uint8, 255.0), (np.uint16, 1.0))
 
 
-def _unpack(stored: np.ndarray, scale: float) -> np.ndarray:
+def unpack(stored: np.ndarray, scale: float) -> np.ndarray:
     out = stored.astype(np.float32)
     return out if scale == 1.0 else out / np.float32(scale)
 
 
-def _pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarray | None:
-    """``value`` as ``dtype`` such that ``_unpack`` gives it back bit for bit, or None."""
+def pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarray | None:
+    """``value`` as ``dtype`` such that ``unpack`` gives it back bit for bit, or None."""
     value = np.asarray(value, dtype=np.float32)
     info = np.iinfo(dtype)
     scaled = np.rint(value * np.float32(scale))
@@ -42,7 +42,16 @@ def _pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarra
         return None
     packed = scaled.astype(dtype)
     # Bit patterns, not values: -0.0 packs to 0 and would come back as +0.0 (they compare equal as floats).
-    return packed if np.array_equal(_unpack(packed, scale).view(np.uint32), value.view(np.uint32)) else None
+    return packed if np.array_equal(unpack(packed, scale).view(np.uint32), value.view(np.uint32)) else None
+
+
+def pack(value: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(stored, scale)`` in the smallest packing that ``unpack`` reverses bit for bit, else float32."""
+    for dtype, scale in _PACKINGS:
+        packed = pack_exactly(value, np.dtype(dtype), scale)
+        if packed is not None:
+            return packed, scale
+    return np.asarray(value, dtype=np.float32), 1.0
 
 
 class _PackedArray:
@@ -51,14 +60,14 @@ class _PackedArray:
     def __init__(self, shape: tuple[int, ...], first: np.ndarray):
         self.dtype, self.scale = np.dtype(np.float32), 1.0
         for dtype, scale in _PACKINGS:
-            if _pack_exactly(first, np.dtype(dtype), scale) is not None:
+            if pack_exactly(first, np.dtype(dtype), scale) is not None:
                 self.dtype, self.scale = np.dtype(dtype), scale
                 break
         self.data = np.zeros(shape, dtype=self.dtype)
 
     def __setitem__(self, index, value: np.ndarray) -> None:
         if self.dtype.kind != "f":
-            packed = _pack_exactly(value, self.dtype, self.scale)
+            packed = pack_exactly(value, self.dtype, self.scale)
             if packed is not None:
                 self.data[index] = packed
                 return
@@ -66,7 +75,7 @@ class _PackedArray:
         self.data[index] = value
 
     def __getitem__(self, index) -> np.ndarray:
-        return _unpack(self.data[index], self.scale)
+        return unpack(self.data[index], self.scale)
 
 
 class EpisodeReplayBuffer:

@@ -52,6 +52,32 @@ class Rollouts:
             yield {k: v[i] for k, v in self.observations.items()}, self.actions[i], gt
 
 
+@dataclass(frozen=True)
+class EpisodeBatch:
+    """What decides one batch of episodes, one per sub-env, besides the weights: the same spec gives the
+    same episodes on the learner's vector env and on a Ray worker's (``ray_rollouts``).
+
+    Exploration noise comes from a generator of its own, seeded from ``generator_seed``, so a batch does not
+    depend on which batches ran before it or where."""
+
+    seeds: tuple[int, ...]
+    explore: bool
+    generator_seed: int | None = None
+    random_eps: float | None = None
+    keep_dataset_frames: bool = False
+
+    def run(
+        self, vec_env: gym.vector.VectorEnv, policy, processors: Processors, keys: list[str], horizon: int
+    ) -> Rollouts:
+        generator = None
+        if self.generator_seed is not None:
+            generator = torch.Generator().manual_seed(self.generator_seed)
+        return run_episodes(
+            vec_env, policy, processors, keys, horizon, seeds=list(self.seeds), explore=self.explore,
+            generator=generator, random_eps=self.random_eps, keep_dataset_frames=self.keep_dataset_frames,
+        )  # fmt: skip
+
+
 def stored_keys(observation_keys: list[str]) -> list[str]:
     """What a rollout keeps: the compared keys and their goals (never ground truth or unused cameras)."""
     return [*observation_keys, *(goal_key(k) for k in observation_keys)]

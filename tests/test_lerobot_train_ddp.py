@@ -1,0 +1,100 @@
+"""``accelerate launch --multi_gpu --num_processes=2 lerobot-train --policy.type=indicator_ddpg`` on CPU (DDP
+over gloo): both processes train, ``policy.update()`` moves the target networks of the unwrapped policy, and
+the checkpoint loads in ``lerobot-eval --policy.path``.
+
+``--multi_gpu`` with the policy on CPU: ``accelerate launch --cpu`` alone starts one process (its simple
+launcher), so the 2-process CPU run goes through torchrun like a GPU one, and lerobot-train's
+``Accelerator(cpu=True)`` picks gloo."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file
+from test_lerobot_train import REPO_ID, make_tiny_reach_dataset
+
+BIN = Path(sys.executable).parent
+
+
+def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
+    data = make_tiny_reach_dataset(tmp_path / "tiny_reach")
+    out = tmp_path / "run"
+    env = {
+        **os.environ,
+        "HF_HUB_OFFLINE": "1",
+        "CUDA_VISIBLE_DEVICES": "",
+        "OMP_NUM_THREADS": "1",
+        "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"),
+    }
+    cmd = [
+        str(BIN / "accelerate"), "launch", "--multi_gpu", "--num_processes=2", "--num_machines=1",
+        "--mixed_precision=no", "--dynamo_backend=no", str(BIN / "lerobot-train"),
+        "--policy.type=indicator_ddpg", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={data}",
+        "--policy.push_to_hub=false", "--policy.device=cpu", "--policy.horizon=6",
+        "--policy.future_offsets=[2,3]", "--policy.hidden_dims=[16,16,16]", "--batch_size=4",
+        "--num_workers=0", "--log_freq=1", "--save_freq=1", "--steps=3", "--wandb.enable=false",
+        f"--output_dir={out}",
+    ]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    log = proc.stdout + proc.stderr
+    assert proc.returncode == 0, log[-6000:]
+    assert "Effective batch size: 4 x 2 = 8" in log, log[-3000:]  # really two processes
+    assert "step:3" in log and "critic_loss" in log, log[-3000:]
+
+    def actors(step: int) -> tuple[dict, dict]:
+        weights = load_file(out / "checkpoints" / f"{step:06d}" / "pretrained_model" / "model.safetensors")
+        assert not any(k.startswith("module.") for k in weights)  # saved unwrapped, as lerobot-eval loads it
+        pick = lambda prefix: {k[len(prefix) :]: v for k, v in weights.items() if k.startswith(prefix)}  # noqa: E731
+        return pick("actor."), pick("target_actor.")
+
+    (_, target_2), (online_3, target_3) = actors(2), actors(3)
+    float_keys = [k for k, v in online_3.items() if v.is_floating_point() and not k.startswith("encoder.")]
+    assert float_keys
+    # Step 3's update() on the unwrapped policy: target <- tau * target + (1 - tau) * online, once per step.
+    for k in float_keys:
+        assert not torch.equal(target_3[k], target_2[k]), k
+        torch.testing.assert_close(target_3[k], 0.98 * target_2[k] + 0.02 * online_3[k], rtol=1e-5, atol=1e-6)
+    pretrained = out / "checkpoints" / "last" / "pretrained_model"
+
+    eval_dir = tmp_path / "eval"
+    proc = subprocess.run(
+        [
+            str(BIN / "lerobot-eval"),
+            f"--policy.path={pretrained}",
+            "--policy.device=cpu",
+            "--env.type=sawyer_reach",
+            "--env.obs_type=state",
+            "--env.episode_length=6",
+            "--eval.n_episodes=1",
+            "--eval.batch_size=1",
+            f"--output_dir={eval_dir}",
+        ],  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=env,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
+    info = json.loads((eval_dir / "eval_info.json").read_text())
+    assert info["overall"]["n_episodes"] == 1
+
+
+def test_loss_curve_benchmark_reads_lerobot_train_log_lines():
+    from lerobot_indicator.bench.ddp_loss import parse_losses, window_means
+
+    log = (
+        "INFO ot_train.py:641 step:2 smpl:16 ep:2 epch:0.76 loss:7.938 grdn:2.835 lr:1.0e-03 updt_s:0.042 "
+        "data_s:0.126 smp/s:47 critic_loss:2.010 actor_loss:5.928 q_mean:-5.922\n"
+        "INFO ot_train.py:641 step:1 smpl:8 ep:1 epch:0.38 loss:9.473 grdn:4.797 lr:1.0e-03 updt_s:0.039 "
+        "data_s:0.265 smp/s:26 critic_loss:3.482 actor_loss:5.991 q_mean:-5.966\n"
+    )
+    assert parse_losses(log) == {
+        "step": [1, 2],
+        "loss": [9.473, 7.938],
+        "critic_loss": [3.482, 2.010],
+        "actor_loss": [5.991, 5.928],
+    }
+    assert window_means([1.0, 3.0, 5.0, 7.0, 9.0], 2) == [2.0, 6.0]

@@ -187,9 +187,13 @@ DEMOS: dict[str, DemoPreset] = {
     "rgbd": DemoPreset(
         TASKS["reach_rgbd"].env_args[:-1],
         [
+            # 3-step targets + the inverse-dynamics loss: the arm that learns reach from pixels
+            # (docs/results/README.md, indicator_balance_filter_n3_inverse_dynamics).
+            "--policy.n_step=3",
+            "--policy.inverse_dynamics=1.0",
             "--steps=6000",
             "--online.episodes_per_cycle=4",
-            "--online.updates_per_cycle=40",
+            "--online.updates_per_cycle=100",
             "--online.eval_episodes=20",
             "--env_eval_freq=1000",
             "--save_freq=6000",

@@ -71,6 +71,9 @@ VARIANTS["indicator_balance_filter_calibrated"] = [
     "--policy.filter_start=calibrated",
 ]
 METHODS.update(LEARNED_REWARD_METHODS)
+# Without random-shift augmentation (the paper's networks see the frames as they are).
+for _m in ("oracle", "indicator_balance_filter_inverse_dynamics"):
+    VARIANTS[f"{_m}_no_augmentation"] = [*(METHODS | VARIANTS)[_m], "--policy.augment_pad=0"]
 METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
@@ -87,6 +90,8 @@ LABELS = {
     "indicator_balance_filter_n3": "Indicator+Balance+Filter, 3-step targets",
     "indicator_balance_filter_inverse_dynamics": "Indicator+Balance+Filter, inverse-dynamics loss",
     "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
+    "oracle_no_augmentation": "Oracle, no augmentation",
+    "indicator_balance_filter_inverse_dynamics_no_augmentation": "Indicator+Balance+Filter, inverse dynamics, no augmentation",
     "indicator_balance_filter_target_q": "Indicator+Balance+Filter, filter Q from the target critic",
     "indicator_balance_filter_calibrated": "Indicator+Balance+Filter, filter once Q is calibrated",
     "ae": "AE",
@@ -108,6 +113,8 @@ STYLES = {
     "indicator_balance_filter_n3": ("darkgreen", "-"),
     "indicator_balance_filter_inverse_dynamics": ("tab:brown", ":"),
     "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
+    "oracle_no_augmentation": ("tab:blue", ":"),
+    "indicator_balance_filter_inverse_dynamics_no_augmentation": ("tab:brown", "--"),
     "indicator_balance_filter_target_q": ("tab:cyan", "--"),
     "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
     "ae": ("black", "-"),

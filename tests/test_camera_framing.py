@@ -126,3 +126,20 @@ def test_framing_statistics_and_probe_run_on_collected_states():
             2,
         )  # one episode each: test frames are unseen episodes
         assert [c["updates"] for c in p["curve"]] == [1, 2] and math.isfinite(p["final_test_error_m"])
+
+
+def test_supersampled_rope_task_preset_keeps_the_observation_size():
+    import draccus
+
+    from lerobot_indicator.presets import TASKS
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    args = [
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        *TASKS["rope_rgbd_supersample4"].env_args,
+    ]
+    cfg = draccus.parse(OnlineTrainConfig, args=args)
+    assert cfg.env.camera.supersample == 4
+    assert (cfg.env.camera.height, cfg.env.camera.width) == (100, 100)
+    assert cfg.env.gym_kwargs["camera"].supersample == 4  # what the env is built with

@@ -16,7 +16,7 @@ import platform
 import sys
 from pathlib import Path
 
-from lerobot_indicator.bench.record_throughput import SETTINGS, THIS_TREE, compare, measure
+from lerobot_indicator.bench.record_throughput import NAMED_SETTINGS, THIS_TREE, compare, measure
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "results" / "record_throughput.json"
 
@@ -30,8 +30,16 @@ def main() -> None:
     parser.add_argument("--compare_root", type=Path, default=None)
     parser.add_argument("--compare_label", default="other", help="name of the --compare_root version")
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--settings",
+        nargs="+",
+        choices=list(NAMED_SETTINGS),
+        default=list(NAMED_SETTINGS),
+        help="what to record",
+    )
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
+    settings = tuple(NAMED_SETTINGS[name] for name in args.settings)
     result = {
         "command": f"MUJOCO_GL={os.environ.get('MUJOCO_GL', '')} python {' '.join(sys.argv)}",
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} CPU cores (shared), no GPU rendering",
@@ -39,13 +47,19 @@ def main() -> None:
     if args.compare_root is None:
         runs = []
         for task in args.tasks:
-            for obs_type, use_videos in SETTINGS:
+            for obs_type, use_videos in settings:
                 runs.append(measure(task, obs_type, args.episodes, use_videos))
                 print(json.dumps(runs[-1]))
         result["runs"] = runs
     else:
         trees = {"current": THIS_TREE, args.compare_label: args.compare_root.resolve()}
-        result |= compare(trees, args.tasks, args.episodes, args.rounds)
+
+        def save(partial: dict) -> None:  # after every measurement: an interrupted run keeps what it measured
+            args.out.write_text(json.dumps(result | partial | {"complete": False}, indent=2) + "\n")
+
+        result |= compare(trees, args.tasks, args.episodes, args.rounds, settings, on_run=save) | {
+            "complete": True
+        }
         for r in result["ratios"]:
             print(json.dumps({k: r[k] for k in ("task", "obs_type", "use_videos", "ratio_median")}))
     args.out.write_text(json.dumps(result, indent=2) + "\n")

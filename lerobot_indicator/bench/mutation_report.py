@@ -26,7 +26,8 @@ def equivalent_mutants(markdown: Path) -> set[str]:
 
 
 def mutation_report(repo: Path, markdown: Path, command: str) -> dict:
-    """Counts per mutated file, the survivors nobody argued equivalent, and stale equivalence entries."""
+    """Counts per mutated file, the undetected mutants nobody argued equivalent (not-checked ones are only
+    counted), and equivalence entries that name no survivor."""
     cfg = tomllib.loads((repo / "pyproject.toml").read_text())["tool"]["mutmut"]
     equivalent = equivalent_mutants(markdown)
     files, unargued, raw_status = {}, [], {}
@@ -40,20 +41,22 @@ def mutation_report(repo: Path, markdown: Path, command: str) -> dict:
             status = raw_status[name] = status_by_exit_code[exit_code]
             if status == "survived" and name in equivalent:
                 status = "equivalent"
-            elif status not in ("killed", "timeout"):
+            elif status not in ("killed", "timeout", "not checked"):
                 unargued.append({"mutant": name, "status": status})
             counts[status] += 1
-        files[source] = {"mutants": len(verdicts), **counts, "score": score(len(verdicts), counts)}
+        files[source] = {"mutants": len(verdicts), **counts, **scores(len(verdicts), counts)}
     total = Counter()
     for c in files.values():
-        total.update({k: v for k, v in c.items() if k != "score"})
+        total.update({k: v for k, v in c.items() if not k.startswith("score")})
     return {
         "tool": f"mutmut {version('mutmut')}",
         "command": command,
         "tests": cfg["pytest_add_cli_args_test_selection"],
-        "score_definition": "(killed + timeout) / (mutants - equivalent); equivalent = argued in mutation.md",
+        "score_definition": "(killed + timeout) / (mutants - equivalent); equivalent = argued in mutation.md; "
+        "score_checked: the same over the mutants mutmut has a verdict for (not 'not checked')",
+        "complete": total["not checked"] == 0,
         "files": files,
-        "total": {**total, "score": score(total["mutants"], total)},
+        "total": {**total, **scores(total["mutants"], total)},
         "not_killed_and_not_argued": unargued,
         "argued_but_not_a_survivor": sorted(n for n in equivalent if raw_status.get(n) != "survived"),
     }
@@ -62,5 +65,9 @@ def mutation_report(repo: Path, markdown: Path, command: str) -> dict:
 STATUSES = ("killed", "timeout", "equivalent", "survived", "no tests", "not checked")
 
 
-def score(mutants: int, counts: Counter) -> float:
-    return round((counts["killed"] + counts["timeout"]) / max(mutants - counts["equivalent"], 1), 4)
+def scores(mutants: int, counts: Counter) -> dict[str, float]:
+    detected, tested = counts["killed"] + counts["timeout"], mutants - counts["equivalent"]
+    return {
+        "score": round(detected / max(tested, 1), 4),
+        "score_checked": round(detected / max(tested - counts["not checked"], 1), 4),
+    }

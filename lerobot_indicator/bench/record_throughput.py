@@ -20,6 +20,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from lerobot.envs.configs import EnvConfig
@@ -29,7 +30,8 @@ from lerobot_indicator.data.recorder import RecordConfig, make_single_env, recor
 
 POLICY = {"sawyer_reach": "noisy_scripted", "rope_push": "noisy_scripted"}
 # (obs_type, use_videos) per task: state, lossless RGB-D frames, RGB-D video.
-SETTINGS = (("state", False), ("rgbd", False), ("rgbd", True))
+NAMED_SETTINGS = {"state": ("state", False), "rgbd": ("rgbd", False), "rgbd_video": ("rgbd", True)}
+SETTINGS = tuple(NAMED_SETTINGS.values())
 THIS_TREE = Path(__file__).resolve().parents[2]
 
 
@@ -89,23 +91,40 @@ def measure_in(tree: Path, task: str, obs_type: str, episodes: int, use_videos: 
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def compare(trees: dict[str, Path], tasks: list[str], episodes: int, rounds: int) -> dict:
+def compare(
+    trees: dict[str, Path],
+    tasks: list[str],
+    episodes: int,
+    rounds: int,
+    settings: tuple[tuple[str, bool], ...] = SETTINGS,
+    on_run: Callable[[dict], None] | None = None,
+) -> dict:
     """Every setting of every task measured once per tree per round, the trees alternating setting by
-    setting; ``ratios`` holds frames/s of the first tree over each other tree, per round and their median."""
+    setting; ``ratios`` holds frames/s of the first tree over each other tree, per round and their median.
+    ``on_run`` gets the result so far (``ratios`` over the complete rounds) after every measurement."""
     labels = list(trees)
     runs = []
     for r in range(rounds):
         order = labels if r % 2 == 0 else labels[::-1]
         for task in tasks:
-            for obs_type, use_videos in SETTINGS:
+            for obs_type, use_videos in settings:
                 for label in order:
                     run = measure_in(trees[label], task, obs_type, episodes, use_videos)
                     runs.append({"version": label, "round": r, **run})
                     print(json.dumps(runs[-1]), flush=True)
+                    if on_run is not None:
+                        on_run({"runs": runs, "ratios": ratios_of(runs, labels, tasks, settings)})
+    return {"runs": runs, "ratios": ratios_of(runs, labels, tasks, settings)}
+
+
+def ratios_of(
+    runs: list[dict], labels: list[str], tasks: list[str], settings: tuple[tuple[str, bool], ...]
+) -> list[dict]:
+    """frames/s of ``labels[0]`` over each other version, per setting, over the rounds both completed."""
     ratios = []
     first, others = labels[0], labels[1:]
     for task in tasks:
-        for obs_type, use_videos in SETTINGS:
+        for obs_type, use_videos in settings:
 
             def fps(label: str, task=task, obs_type=obs_type, use_videos=use_videos) -> list[float]:
                 return [
@@ -116,7 +135,9 @@ def compare(trees: dict[str, Path], tasks: list[str], episodes: int, rounds: int
                 ]
 
             for other in others:
-                per_round = [a / b for a, b in zip(fps(first), fps(other), strict=True)]
+                per_round = [a / b for a, b in zip(fps(first), fps(other), strict=False)]
+                if not per_round:
+                    continue
                 ratios.append(
                     {
                         "task": task,
@@ -129,7 +150,7 @@ def compare(trees: dict[str, Path], tasks: list[str], episodes: int, rounds: int
                         "ratio_median": round(statistics.median(per_round), 3),
                     }
                 )
-    return {"runs": runs, "ratios": ratios}
+    return ratios
 
 
 if __name__ == "__main__":

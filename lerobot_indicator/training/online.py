@@ -324,10 +324,15 @@ class OnlineTrainer:
     def optimise(self, rng: np.random.Generator, generator: torch.Generator) -> dict[str, float]:
         self.policy.train()
         sums: dict[str, float] = {}
+        data_s = update_s = (
+            0.0  # wall time of the cycle sampling the buffer / updating (lerobot-train's split)
+        )
         for _ in range(self.cfg.online.updates_per_cycle):
+            t0 = time.perf_counter()
             batch = to_transition_batch(
                 self.buffer.sample(self.batch_size, rng, packed=True), self.keys, self.horizon, self.device
             )
+            t1 = time.perf_counter()
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -336,7 +341,9 @@ class OnlineTrainer:
             self.progress.step += 1
             for k, v in stats.items():
                 sums[k] = sums.get(k, 0.0) + v
-        return {k: v / self.cfg.online.updates_per_cycle for k, v in sums.items()}
+            data_s, update_s = data_s + t1 - t0, update_s + time.perf_counter() - t1
+        means = {k: v / self.cfg.online.updates_per_cycle for k, v in sums.items()}
+        return {**means, "data_s": data_s, "update_s": update_s}
 
     def save_checkpoint(self) -> Path:
         """LeRobot-train layout, loadable by ``lerobot-eval --policy.path=<dir>/pretrained_model``."""

@@ -122,7 +122,9 @@ def main() -> None:
         lossy = copy_as_video(reference, REPO, Path(tmp) / "lossy")
         record["frame_equality_vs_png"] = {
             "compared_keys": COMPARED,
-            "video_lossless": equality_errors(reference, LeRobotDataset(REPO, root=roots["video"]), COMPARED),
+            "video_lossless": equality_errors(
+                reference, LeRobotDataset(REPO, root=roots["video"], video_backend="pyav"), COMPARED
+            ),
             "video_lerobot_default_encoders": equality_errors(reference, lossy, COMPARED),
         }
         save()

@@ -1,7 +1,7 @@
 """Samples/s of the offline paths on one recorded RGB-D dataset, stored as PNG/TIFF frames and as lossless video.
 
 Records ``--episodes`` RGB-D reach episodes twice with the recorder (``--use_videos=false`` / ``true``, same
-seed), then, in one run on the same machine load:
+seed; or takes them from ``--png_root`` / ``--video_root``), then, in one run on the same machine load:
 
 1. ``LeRobotDataset.__getitem__`` with the policy's delta indices (samples/s, PNG/TIFF decodes per sample);
 2. frame equality of the video copy, and of a copy with LeRobot's default (lossy) video encoders, against
@@ -35,6 +35,7 @@ BIN = Path(sys.executable).parent
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 REPO = "bench/rgbd"
 COMPARED = ["observation.images.front", "observation.images.front_depth"]
+PARTS = ["getitem", "equality", "lerobot_train", "offline"]
 
 
 def run(cmd: list[str]) -> str:
@@ -65,6 +66,55 @@ def lerobot_train(root: Path, out: Path, batch_size: int, steps: int, num_worker
     }
 
 
+def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:
+    """``__getitem__`` as lerobot-train builds the dataset (policy delta indices, uint8 video frames)."""
+    cfg = IndicatorDDPGConfig(device="cpu")
+    datasets, delta = {}, None
+    for name, root in roots.items():
+        meta = LeRobotDataset(REPO, root=root, video_backend="pyav").meta
+        delta = resolve_delta_timestamps(cfg, meta)
+        datasets[name] = LeRobotDataset(
+            REPO, root=root, video_backend="pyav", return_uint8=True, delta_timestamps=delta
+        )
+    rates = loading_rates(datasets, samples)
+    rates["video_over_png_samples_per_s"] = rates["video"]["samples_per_s"] / rates["png"]["samples_per_s"]
+    return delta, rates
+
+
+def measure_equality(roots: dict[str, Path], lossy_root: Path) -> dict:
+    """Indicator equality on the stored frames: lossless video and LeRobot's default encoders vs PNG/TIFF."""
+    reference = LeRobotDataset(REPO, root=roots["png"], video_backend="pyav")
+    lossy = copy_as_video(reference, REPO, lossy_root)
+    video = LeRobotDataset(REPO, root=roots["video"], video_backend="pyav")
+    return {
+        "compared_keys": COMPARED,
+        "video_lossless": equality_errors(reference, video, COMPARED),
+        "video_lerobot_default_encoders": equality_errors(reference, lossy, COMPARED),
+    }
+
+
+def offline_path(env_args: list[str], root: Path, out: Path, batch_size: int, updates: int) -> dict:
+    """``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0``: its second cycle's timings."""
+    t0 = time.perf_counter()
+    run([str(BIN / "lerobot-indicator-train"), *env_args, "--policy.type=indicator_ddpg",
+         "--policy.push_to_hub=false", "--policy.device=cpu", f"--dataset.repo_id={REPO}",
+         f"--dataset.root={root}", "--dataset.video_backend=pyav", "--online.episodes_per_cycle=0",
+         f"--online.batch_size={batch_size}", f"--online.updates_per_cycle={updates}",
+         f"--steps={updates * 2}", "--env_eval_freq=0", "--online.eval_episodes=1", "--save_checkpoint=false",
+         f"--output_dir={out}"])  # fmt: skip
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    cycle_s = rows[1]["wall_time_s"] - rows[0]["wall_time_s"]
+    return {
+        "process_wall_s": time.perf_counter() - t0,
+        "first_cycle_s": rows[0]["wall_time_s"],
+        "updates_per_s": updates / cycle_s,
+        "samples_per_s": updates * batch_size / cycle_s,
+        "data_s_per_cycle": rows[1]["data_s"],
+        "update_s_per_cycle": rows[1]["update_s"],
+        "loading_share_of_update_time": rows[1]["data_s"] / (rows[1]["data_s"] + rows[1]["update_s"]),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=10)
@@ -72,6 +122,7 @@ def main() -> None:
     parser.add_argument("--batch_size", type=int, default=128)
     parser.add_argument("--steps", type=int, default=10)
     parser.add_argument("--getitem_samples", type=int, default=30)
+    parser.add_argument("--parts", nargs="+", default=PARTS, choices=PARTS, help="measured in this order")
     parser.add_argument(
         "--runs",
         nargs="+",
@@ -79,6 +130,9 @@ def main() -> None:
         help="lerobot-train runs, storage:num_workers",
     )
     parser.add_argument("--out", type=Path, required=True)
+    # Datasets already recorded with the same settings (--use_videos=false / true); default: record both.
+    parser.add_argument("--png_root", type=Path, default=None)
+    parser.add_argument("--video_root", type=Path, default=None)
     args = parser.parse_args()
     torch.set_num_threads(1)
     env_args = ["--env.type=sawyer_reach", "--env.obs_type=rgbd", f"--env.camera.height={args.size}",
@@ -93,8 +147,11 @@ def main() -> None:
         args.out.write_text(json.dumps(record, indent=2) + "\n")
 
     with tempfile.TemporaryDirectory() as tmp:
-        roots = {"png": Path(tmp) / "png", "video": Path(tmp) / "video"}
+        given = {"png": args.png_root, "video": args.video_root}
+        roots = {name: given[name] or Path(tmp) / name for name in given}
         for name, root in roots.items():
+            if given[name] is not None:
+                continue
             run([str(BIN / "lerobot-indicator-record"), *env_args, "--policy=noisy_scripted",
                  f"--num_episodes={args.episodes}", f"--repo_id={REPO}", f"--root={root}",
                  f"--use_videos={str(name == 'video').lower()}"])  # fmt: skip
@@ -102,62 +159,25 @@ def main() -> None:
             name: sum(f.stat().st_size for f in root.rglob("*") if f.is_file()) / 2**20
             for name, root in roots.items()
         }
-        # 1. __getitem__ as lerobot-train builds the dataset (policy delta indices, uint8 video frames).
-        cfg = IndicatorDDPGConfig(device="cpu")
-        sample_ds = {}
-        for name, root in roots.items():
-            ds = LeRobotDataset(REPO, root=root, video_backend="pyav", return_uint8=True)
-            delta = resolve_delta_timestamps(cfg, ds.meta)
-            sample_ds[name] = LeRobotDataset(
-                REPO, root=root, video_backend="pyav", return_uint8=True, delta_timestamps=delta
-            )
-            record.setdefault("delta_timestamps_s", delta)
-        record["getitem"] = loading_rates(sample_ds, args.getitem_samples)
-        record["getitem"]["video_over_png_samples_per_s"] = (
-            record["getitem"]["video"]["samples_per_s"] / record["getitem"]["png"]["samples_per_s"]
-        )
-        save()
-        # 2. Indicator equality on the stored frames.
-        reference = LeRobotDataset(REPO, root=roots["png"], video_backend="pyav")
-        lossy = copy_as_video(reference, REPO, Path(tmp) / "lossy")
-        record["frame_equality_vs_png"] = {
-            "compared_keys": COMPARED,
-            "video_lossless": equality_errors(
-                reference, LeRobotDataset(REPO, root=roots["video"], video_backend="pyav"), COMPARED
-            ),
-            "video_lerobot_default_encoders": equality_errors(reference, lossy, COMPARED),
-        }
-        save()
-        # 3. lerobot-train.
-        record["lerobot_train"] = {}
-        for spec in args.runs:
-            name, workers = spec.split(":")
-            out = Path(tmp) / f"lt_{name}_{workers}"
-            record["lerobot_train"][f"{name}_workers{workers}"] = lerobot_train(
-                roots[name], out, args.batch_size, args.steps, int(workers)
-            )
+        for part in args.parts:  # in the order given
+            if part == "getitem":
+                record["delta_timestamps_s"], record["getitem"] = measure_getitem(roots, args.getitem_samples)
+            elif part == "equality":
+                record["frame_equality_vs_png"] = measure_equality(roots, Path(tmp) / "lossy")
+            elif part == "offline":
+                record["online_trainer_offline"] = offline_path(
+                    env_args, roots["video"], Path(tmp) / "online", args.batch_size, args.steps * 5
+                )
+            else:
+                record["lerobot_train"] = {}
+                for spec in args.runs:
+                    name, workers = spec.split(":")
+                    out = Path(tmp) / f"lt_{name}_{workers}"
+                    record["lerobot_train"][f"{name}_workers{workers}"] = lerobot_train(
+                        roots[name], out, args.batch_size, args.steps, int(workers)
+                    )
+                    save()
             save()
-        # 4. The in-memory offline path.
-        out = Path(tmp) / "online"
-        updates = args.steps * 5
-        t0 = time.perf_counter()
-        run([str(BIN / "lerobot-indicator-train"), *env_args, "--policy.type=indicator_ddpg",
-             "--policy.push_to_hub=false", "--policy.device=cpu", f"--dataset.repo_id={REPO}",
-             f"--dataset.root={roots['video']}", "--online.episodes_per_cycle=0",
-             f"--online.batch_size={args.batch_size}", f"--online.updates_per_cycle={updates}",
-             f"--steps={updates * 2}", "--env_eval_freq=0", "--online.eval_episodes=1", "--save_checkpoint=false",
-             f"--output_dir={out}"])  # fmt: skip
-        rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
-        cycle_s = rows[1]["wall_time_s"] - rows[0]["wall_time_s"]
-        record["online_trainer_offline"] = {
-            "process_wall_s": time.perf_counter() - t0,
-            "first_cycle_s": rows[0]["wall_time_s"],
-            "updates_per_s": updates / cycle_s,
-            "samples_per_s": updates * args.batch_size / cycle_s,
-            "data_s_per_cycle": rows[1]["data_s"],
-            "update_s_per_cycle": rows[1]["update_s"],
-            "loading_share_of_update_time": rows[1]["data_s"] / (rows[1]["data_s"] + rows[1]["update_s"]),
-        }
     record["complete"] = True
     record["load_average_1_5_15_min_after"] = os.getloadavg()
     print(json.dumps(record, indent=1))

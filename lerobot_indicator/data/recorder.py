@@ -79,7 +79,7 @@ class RecordConfig:
     # Continue an existing dataset at root (required if it exists; nothing is ever overwritten).
     resume: bool = False
     # False: PNG/TIFF frames inside the parquet rows. True: lossless HEVC video (data/storage.py), the same
-    # decoded frames, and far cheaper for lerobot-train to load (docs/dataset_format.md). Both bit-exact.
+    # decoded frames; lerobot-train then decodes no image columns in its row reads (docs/dataset_format.md).
     use_videos: bool = False
     seed: int = 0
     # Gaussian action noise (action units) of noisy_scripted.

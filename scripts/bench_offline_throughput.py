@@ -1,9 +1,14 @@
-"""Samples/s of the two offline paths on one recorded RGB-D dataset: ``lerobot-train`` and
-``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0`` (in-memory buffer).
+"""Samples/s of the offline paths on one recorded RGB-D dataset, stored as PNG/TIFF frames and as lossless video.
 
-Records ``--episodes`` RGB-D reach episodes with the recorder, then runs both trainers for a few steps at
-``--batch_size`` and reads their own timings: lerobot-train's logged ``data_s`` / ``updt_s`` (the last
-logged step's values; LeRobot logs the max over the log window), the online trainer's wall time per cycle.
+Records ``--episodes`` RGB-D reach episodes twice with the recorder (``--use_videos=false`` / ``true``, same
+seed; or takes them from ``--png_root`` / ``--video_root``), then, in one run on the same machine load:
+
+1. ``LeRobotDataset.__getitem__`` with the policy's delta indices (samples/s, PNG/TIFF decodes per sample);
+2. frame equality of the video copy, and of a copy with LeRobot's default (lossy) video encoders, against
+   the PNG/TIFF frames (false positives / negatives of the indicator's bit-for-bit comparison);
+3. ``lerobot-train`` on each, reading its own logged ``data_s`` / ``updt_s`` (steps after the first two);
+4. ``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0`` (in-memory buffer): updates/s of a
+   cycle and the share of a cycle spent sampling the buffer.
 
     python scripts/bench_offline_throughput.py --out docs/results/offline_throughput.json
 """
@@ -19,8 +24,18 @@ import tempfile
 import time
 from pathlib import Path
 
+import torch
+from lerobot.datasets.factory import resolve_delta_timestamps
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_indicator.bench.dataset_loading import copy_as_video, equality_errors, loading_rates
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+
 BIN = Path(sys.executable).parent
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+REPO = "bench/rgbd"
+COMPARED = ["observation.images.front", "observation.images.front_depth"]
+PARTS = ["getitem", "equality", "lerobot_train", "offline"]
 
 
 def run(cmd: list[str]) -> str:
@@ -30,55 +45,143 @@ def run(cmd: list[str]) -> str:
     return proc.stdout + proc.stderr
 
 
+def lerobot_train(root: Path, out: Path, batch_size: int, steps: int, num_workers: int) -> dict:
+    cmd = [str(BIN / "lerobot-train"), "--policy.type=indicator_ddpg", "--policy.push_to_hub=false",
+           "--policy.device=cpu", f"--dataset.repo_id={REPO}", f"--dataset.root={root}",
+           "--dataset.video_backend=pyav", f"--batch_size={batch_size}", f"--steps={steps}", "--log_freq=1",
+           f"--num_workers={num_workers}", "--save_checkpoint=false", "--wandb.enable=false",
+           f"--output_dir={out}"]  # fmt: skip
+    log = run(cmd)
+    # The first two steps hold the loader's start (workers, accelerate's one-batch look-ahead).
+    data_s = [float(x) for x in re.findall(r"data_s:([0-9.]+)", log)][2:]
+    updt_s = [float(x) for x in re.findall(r"updt_s:([0-9.]+)", log)][2:]
+    step_s = (sum(data_s) + sum(updt_s)) / len(data_s)
+    return {
+        "command": shlex.join(["lerobot-train", *cmd[1:]]),
+        "steps_averaged": len(data_s),
+        "data_s_per_step": sum(data_s) / len(data_s),
+        "update_s_per_step": sum(updt_s) / len(updt_s),
+        "samples_per_s": batch_size / step_s,
+        "loading_share_of_step": sum(data_s) / (sum(data_s) + sum(updt_s)),
+    }
+
+
+def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:
+    """``__getitem__`` as lerobot-train builds the dataset (policy delta indices, uint8 video frames)."""
+    cfg = IndicatorDDPGConfig(device="cpu")
+    datasets, delta = {}, None
+    for name, root in roots.items():
+        meta = LeRobotDataset(REPO, root=root, video_backend="pyav").meta
+        delta = resolve_delta_timestamps(cfg, meta)
+        datasets[name] = LeRobotDataset(
+            REPO, root=root, video_backend="pyav", return_uint8=True, delta_timestamps=delta
+        )
+    rates = loading_rates(datasets, samples)
+    rates["video_over_png_samples_per_s"] = rates["video"]["samples_per_s"] / rates["png"]["samples_per_s"]
+    return delta, rates
+
+
+def measure_equality(roots: dict[str, Path], lossy_root: Path) -> dict:
+    """Indicator equality on the stored frames: lossless video and LeRobot's default encoders vs PNG/TIFF."""
+    reference = LeRobotDataset(REPO, root=roots["png"], video_backend="pyav")
+    lossy = copy_as_video(reference, REPO, lossy_root)
+    video = LeRobotDataset(REPO, root=roots["video"], video_backend="pyav")
+    return {
+        "compared_keys": COMPARED,
+        "video_lossless": equality_errors(reference, video, COMPARED),
+        "video_lerobot_default_encoders": equality_errors(reference, lossy, COMPARED),
+    }
+
+
+def offline_path(env_args: list[str], root: Path, out: Path, batch_size: int, updates: int) -> dict:
+    """``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0``: its second cycle's timings."""
+    t0 = time.perf_counter()
+    run([str(BIN / "lerobot-indicator-train"), *env_args, "--policy.type=indicator_ddpg",
+         "--policy.push_to_hub=false", "--policy.device=cpu", f"--dataset.repo_id={REPO}",
+         f"--dataset.root={root}", "--dataset.video_backend=pyav", "--online.episodes_per_cycle=0",
+         f"--online.batch_size={batch_size}", f"--online.updates_per_cycle={updates}",
+         f"--steps={updates * 2}", "--env_eval_freq=0", "--online.eval_episodes=1", "--save_checkpoint=false",
+         f"--output_dir={out}"])  # fmt: skip
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    cycle_s = rows[1]["wall_time_s"] - rows[0]["wall_time_s"]
+    return {
+        "process_wall_s": time.perf_counter() - t0,
+        "first_cycle_s": rows[0]["wall_time_s"],
+        "updates_per_s": updates / cycle_s,
+        "samples_per_s": updates * batch_size / cycle_s,
+        "data_s_per_cycle": rows[1]["data_s"],
+        "update_s_per_cycle": rows[1]["update_s"],
+        "loading_share_of_update_time": rows[1]["data_s"] / (rows[1]["data_s"] + rows[1]["update_s"]),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--batch_size", type=int, default=128)
-    parser.add_argument("--steps", type=int, default=6)
+    parser.add_argument("--steps", type=int, default=10)
+    parser.add_argument("--getitem_samples", type=int, default=30)
+    parser.add_argument("--parts", nargs="+", default=PARTS, choices=PARTS, help="measured in this order")
+    parser.add_argument(
+        "--runs",
+        nargs="+",
+        default=["png:0", "video:0", "video:2"],
+        help="lerobot-train runs, storage:num_workers",
+    )
     parser.add_argument("--out", type=Path, required=True)
+    # Datasets already recorded with the same settings (--use_videos=false / true); default: record both.
+    parser.add_argument("--png_root", type=Path, default=None)
+    parser.add_argument("--video_root", type=Path, default=None)
     args = parser.parse_args()
+    torch.set_num_threads(1)
     env_args = ["--env.type=sawyer_reach", "--env.obs_type=rgbd", f"--env.camera.height={args.size}",
                 f"--env.camera.width={args.size}"]  # fmt: skip
-    record = {"command": shlex.join(["python", *sys.argv]), "load_average_1_5_15_min_before": os.getloadavg()}
+    record = {
+        "command": shlex.join(["python", *sys.argv]),
+        "complete": False,  # each part is written as soon as it is measured
+        "load_average_1_5_15_min_before": os.getloadavg(),
+    }
+
+    def save() -> None:
+        args.out.write_text(json.dumps(record, indent=2) + "\n")
+
     with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp) / "ds"
-        run([str(BIN / "lerobot-indicator-record"), *env_args, "--policy=noisy_scripted",
-             f"--num_episodes={args.episodes}", "--repo_id=bench/rgbd", f"--root={root}"])  # fmt: skip
-        common = ["--policy.type=indicator_ddpg", "--policy.push_to_hub=false", "--policy.device=cpu"]
-        log = run([str(BIN / "lerobot-train"), *common, "--dataset.repo_id=bench/rgbd", f"--dataset.root={root}",
-                   f"--batch_size={args.batch_size}", f"--steps={args.steps}", "--log_freq=1", "--num_workers=0",
-                   "--save_checkpoint=false", "--wandb.enable=false", f"--output_dir={Path(tmp) / 'lt'}"])  # fmt: skip
-        data_s = [float(x) for x in re.findall(r"data_s:([0-9.]+)", log)][1:]  # the first step warms up
-        updt_s = [float(x) for x in re.findall(r"updt_s:([0-9.]+)", log)][1:]
-        step_s = (sum(data_s) + sum(updt_s)) / len(data_s)
-        record["lerobot_train"] = {
-            "data_s_per_step": sum(data_s) / len(data_s),
-            "update_s_per_step": sum(updt_s) / len(updt_s),
-            "samples_per_s": args.batch_size / step_s,
-            "loading_share_of_step": sum(data_s) / (sum(data_s) + sum(updt_s)),
+        given = {"png": args.png_root, "video": args.video_root}
+        roots = {name: given[name] or Path(tmp) / name for name in given}
+        for name, root in roots.items():
+            if given[name] is not None:
+                continue
+            run([str(BIN / "lerobot-indicator-record"), *env_args, "--policy=noisy_scripted",
+                 f"--num_episodes={args.episodes}", f"--repo_id={REPO}", f"--root={root}",
+                 f"--use_videos={str(name == 'video').lower()}"])  # fmt: skip
+        record["dataset_mb"] = {
+            name: sum(f.stat().st_size for f in root.rglob("*") if f.is_file()) / 2**20
+            for name, root in roots.items()
         }
-        out = Path(tmp) / "online"
-        t0 = time.perf_counter()
-        run([str(BIN / "lerobot-indicator-train"), *env_args, *common, "--dataset.repo_id=bench/rgbd",
-             f"--dataset.root={root}", "--online.episodes_per_cycle=0", f"--online.batch_size={args.batch_size}",
-             f"--online.updates_per_cycle={args.steps * 5}", f"--steps={args.steps * 10}", "--env_eval_freq=0",
-             "--online.eval_episodes=1", "--save_checkpoint=false", f"--output_dir={out}"])  # fmt: skip
-        total_s = time.perf_counter() - t0
-        rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
-        # The dataset is decoded into the buffer before the first cycle; a cycle is sampling + updates.
-        cycle_s = rows[1]["wall_time_s"] - rows[0]["wall_time_s"]
-        record["online_trainer_offline"] = {
-            "process_wall_s": total_s,
-            "first_cycle_s": rows[0]["wall_time_s"],
-            "updates_per_s": args.steps * 5 / cycle_s,
-            "samples_per_s": args.steps * 5 * args.batch_size / cycle_s,
-        }
-    record["online_over_lerobot_train_samples_per_s"] = (
-        record["online_trainer_offline"]["samples_per_s"] / record["lerobot_train"]["samples_per_s"]
-    )
+        for part in args.parts:  # in the order given
+            if part == "getitem":
+                record["delta_timestamps_s"], record["getitem"] = measure_getitem(roots, args.getitem_samples)
+            elif part == "equality":
+                record["frame_equality_vs_png"] = measure_equality(roots, Path(tmp) / "lossy")
+            elif part == "offline":
+                record["online_trainer_offline"] = offline_path(
+                    env_args, roots["video"], Path(tmp) / "online", args.batch_size, args.steps * 5
+                )
+            else:
+                record["lerobot_train"] = {}
+                for spec in args.runs:
+                    name, workers = spec.split(":")
+                    out = Path(tmp) / f"lt_{name}_{workers}"
+                    record["lerobot_train"][f"{name}_workers{workers}"] = lerobot_train(
+                        roots[name], out, args.batch_size, args.steps, int(workers)
+                    )
+                    save()
+            save()
+    record["complete"] = True
+    record["load_average_1_5_15_min_after"] = os.getloadavg()
     print(json.dumps(record, indent=1))
-    args.out.write_text(json.dumps(record, indent=2) + "\n")
+    save()
 
 
 if __name__ == "__main__":

@@ -6,8 +6,8 @@
         --root=outputs/datasets/sawyer_reach_rgbd --push_to_hub=false
 
 ``--policy``: random | scripted | noisy_scripted | <pretrained policy directory>. ``--resume=true``
-continues an existing dataset (also after a killed recording). ``--use_videos=true`` stores MP4
-instead of lossless frames (smaller, but breaks bit-exact indicator rewards on images).
+continues an existing dataset (also after a killed recording). ``--use_videos=true`` stores lossless
+HEVC video instead of PNG/TIFF frames: the same decoded frames, cheaper for ``lerobot-train`` to load.
 """
 
 from lerobot_indicator.data.recorder import main

@@ -103,6 +103,35 @@ def test_select_action_names_missing_inputs():
         policy.select_action(batch)
 
 
+def test_select_action_on_a_time_stacked_batch_names_key_and_shapes():
+    """lerobot-train's delta indices stack frames as (B, T, ...); select_action takes one frame per key."""
+    policy = IndicatorDDPGPolicy(rgbd_config())
+    batch = {k: v[:, None].expand(-1, 6, -1, -1, -1) for k, v in rgbd_batch(2).items()}
+    with pytest.raises(ValueError) as err:
+        policy.select_action(batch)
+    message = str(err.value)
+    assert "\n" not in message
+    assert message.startswith(f"{RGB}: expected shape (B, 3, 32, 32), got (2, 6, 3, 32, 32)")
+    state_policy = IndicatorDDPGPolicy(make_config({STATE: vec(), GOAL: vec()}))
+    with pytest.raises(ValueError, match=r"observation.state: expected shape \(B, 3\), got \(4, 6, 3\)"):
+        state_policy.select_action({STATE: torch.zeros(4, 6, 3), GOAL: torch.zeros(4, 6, 3)})
+
+
+def test_policy_on_images_of_another_size_names_key_and_sizes():
+    """A 32 px policy given 64 px frames (e.g. a 64 px env) fails with the key, expected and actual HxW."""
+    policy = IndicatorDDPGPolicy(rgbd_config())
+    batch = {k: torch.nn.functional.interpolate(v, size=(64, 64)) for k, v in rgbd_batch(2).items()}
+    with pytest.raises(ValueError) as err:
+        policy.select_action(batch)
+    message = str(err.value)
+    assert "\n" not in message
+    assert message.startswith(f"{RGB}: the policy was made for 32x32 (HxW) images, got 64x64")
+    # Only the goal of another size: its own key is named.
+    mixed = dict(rgbd_batch(2), **{GOAL_DEPTH: batch[GOAL_DEPTH]})
+    with pytest.raises(ValueError, match=f"^{GOAL_DEPTH}: the policy was made for 32x32"):
+        policy.select_action(mixed)
+
+
 def test_exploration_action_noise_and_random_actions():
     policy = IndicatorDDPGPolicy(make_config({STATE: vec(), GOAL: vec()}))
     batch = {STATE: torch.zeros(4000, 3), GOAL: torch.ones(4000, 3)}

@@ -62,6 +62,7 @@ from lerobot_indicator.data.features import (
     observation_frame,
     unbatch,
 )
+from lerobot_indicator.data.storage import check_depth_range, video_encoders
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 from lerobot_indicator.policy.indicator_core import indicator_reward
 
@@ -77,7 +78,8 @@ class RecordConfig:
     num_episodes: int = 10  # to record in this run (with resume: to add)
     # Continue an existing dataset at root (required if it exists; nothing is ever overwritten).
     resume: bool = False
-    # False: lossless PNG/TIFF frames (exact indicator comparisons). True: MP4 (lossy, small).
+    # False: PNG/TIFF frames inside the parquet rows. True: lossless HEVC video (data/storage.py), the same
+    # decoded frames; lerobot-train then decodes no image columns in its row reads (docs/dataset_format.md).
     use_videos: bool = False
     seed: int = 0  # episode e resets the env with seed + e
     # Gaussian action noise (action units) of noisy_scripted.
@@ -321,7 +323,11 @@ def _check_resume(cfg: RecordConfig, features: dict, horizon: int | None) -> Non
 
 def _resume(cfg: RecordConfig) -> LeRobotDataset:
     return LeRobotDataset.resume(
-        cfg.repo_id, root=cfg.root, video_backend="pyav", image_writer_threads=cfg.image_writer_threads
+        cfg.repo_id,
+        root=cfg.root,
+        video_backend="pyav",
+        image_writer_threads=cfg.image_writer_threads,
+        **video_encoders(),
     )
 
 
@@ -341,6 +347,7 @@ def _create(cfg: RecordConfig, features: dict, root: Path) -> LeRobotDataset:
         use_videos=cfg.use_videos,
         video_backend="pyav",
         image_writer_threads=cfg.image_writer_threads,
+        **video_encoders(),
     )
 
 
@@ -399,6 +406,7 @@ class StagedRecording:
                     root=stage,
                     video_backend="pyav",
                     image_writer_threads=cfg.image_writer_threads,
+                    **video_encoders(),
                 )
             except BaseException:
                 discard_stage(self.root)
@@ -606,6 +614,10 @@ def write_episode(
         raise ValueError(
             f"an episode needs T + 1 observations for T actions, got {len(frames)} and {len(actions)}"
         )
+    video_depth = [k for k in dataset.meta.depth_keys if k in dataset.meta.video_keys]
+    for frame in frames:
+        for key in video_depth:
+            check_depth_range(key, frame[key])
     goal = {k: torch.from_numpy(np.ascontiguousarray(frames[0][goal_key(k)]))[None] for k in reward_keys}
     horizon = len(actions)
     for t, action in enumerate(actions):

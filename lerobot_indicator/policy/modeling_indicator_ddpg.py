@@ -107,6 +107,8 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         missing = [k for k in self.config.observation_keys + self.config.goal_keys if k not in batch]
         if missing:
             raise KeyError(f"batch lacks the policy inputs {missing} (has {sorted(batch)})")
+        for key in self.config.observation_keys + self.config.goal_keys:
+            check_input_shape(key, batch[key], tuple(self.config.input_features[key].shape))
         obs = {k: batch[k] for k in self.config.observation_keys}
         goal = {k: batch[goal_key(k)] for k in self.config.observation_keys}
         return obs, goal
@@ -142,6 +144,34 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         )
         use_random = torch.rand(action.shape[0], generator=generator, device=gen_device).to(action.device)
         return torch.where((use_random < random_eps)[:, None], rand_action, action)
+
+
+class InputShapeError(ValueError):
+    """A policy input whose shape is not the one the policy was made for."""
+
+
+def check_input_shape(key: str, value: Tensor, feature_shape: tuple[int, ...]) -> None:
+    """One line naming ``key``, the expected and the actual shape, for an input that is not (B, *feature_shape).
+
+    Catches a time-stacked batch (``lerobot-train``'s delta indices add a time axis: (B, T, ...)) and an image
+    of another size (a 32 px policy on a 64 px env), which would otherwise fail deep inside a conv or matmul.
+    """
+    actual = tuple(value.shape)
+    if actual[1:] == feature_shape:
+        return
+    expected = f"(B, {', '.join(map(str, feature_shape))})"
+    if len(feature_shape) == 3 and len(actual) == 4 and actual[1] == feature_shape[0]:
+        raise InputShapeError(
+            f"{key}: the policy was made for {feature_shape[1]}x{feature_shape[2]} (HxW) images, got "
+            f"{actual[2]}x{actual[3]} (batch shape {actual}, expected {expected}); use an env or dataset of "
+            "that image size"
+        )
+    stacked = (
+        " (a time-stacked batch? select_action takes one frame per key)"
+        if len(actual) == len(feature_shape) + 2
+        else ""
+    )
+    raise InputShapeError(f"{key}: expected shape {expected}, got {actual}{stacked}")
 
 
 def dataset_horizon(dataset_meta) -> int:

@@ -205,9 +205,14 @@ class OnlineTrainer:
         self.policy.train()
         sums: dict[str, float] = {}
         n_step = self.policy.config.n_step
+        data_s = update_s = (
+            0.0  # wall time of the cycle sampling the buffer / updating (lerobot-train's split)
+        )
         for _ in range(self.cfg.online.updates_per_cycle):
+            t_data = time.perf_counter()
             sample = self.buffer.sample(self.batch_size, rng, packed=True, n_step=n_step)
             batch = to_transition_batch(sample, self.keys, self.horizon, self.device)
+            t_update = time.perf_counter()
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
             loss.backward()
@@ -216,7 +221,9 @@ class OnlineTrainer:
             self.progress.step += 1
             for k, v in stats.items():
                 sums[k] = sums.get(k, 0.0) + v
+            data_s, update_s = data_s + t_update - t_data, update_s + time.perf_counter() - t_update
         means = {k: v / self.cfg.online.updates_per_cycle for k, v in sums.items()}
+        means |= {"data_s": data_s, "update_s": update_s}
         self._phase_end(self.hooks.on_update_end, t0, means)
         return means
 

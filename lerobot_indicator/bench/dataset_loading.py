@@ -1,0 +1,139 @@
+"""What a ``lerobot-train`` sample of a recorded dataset costs, and what video storage does to the indicator.
+
+- :func:`loading_rates`: samples/s of ``LeRobotDataset.__getitem__`` with the policy's delta indices, and
+  the image decodes per sample (PNG/TIFF frames: ``datasets`` decodes every image column of every row a
+  key's delta query touches; video frames are decoded per video key instead).
+- :func:`equality_errors`: the indicator compares frames bit for bit. Over every pair of frames of an
+  episode (a relabelled goal o_{t'} against o_{t+1}, and each frame against the episode's goal) it counts
+  the pairs a stored copy of the dataset calls equal where the lossless source does not (false positives)
+  and the reverse (false negatives).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from contextlib import contextmanager
+
+import torch
+from datasets.features import image as hf_image
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_indicator.keys import goal_key
+
+
+@contextmanager
+def count_image_decodes():
+    """Counts ``datasets``' PNG/TIFF decodes in this process while the context is open."""
+    counter: Counter = Counter()
+    original = hf_image.Image.decode_example
+
+    def counting(self, value, token_per_repo_id=None):
+        counter["decodes"] += 1
+        return original(self, value, token_per_repo_id)
+
+    hf_image.Image.decode_example = counting
+    try:
+        yield counter
+    finally:
+        hf_image.Image.decode_example = original
+
+
+def loading_rates(datasets: dict[str, LeRobotDataset], samples: int, rounds: int = 3) -> dict[str, dict]:
+    """Samples/s of each dataset's ``__getitem__``, timed in interleaved rounds (same load on every arm)."""
+    elapsed = dict.fromkeys(datasets, 0.0)
+    decodes = {}
+    for name, ds in datasets.items():
+        with count_image_decodes() as counter:
+            ds[0]
+        decodes[name] = counter["decodes"]
+    for r in range(rounds):
+        for name, ds in datasets.items():
+            t0 = time.perf_counter()
+            for i in range(samples):
+                ds[(r * samples + i) * 7 % len(ds)]
+            elapsed[name] += time.perf_counter() - t0
+    return {
+        name: {
+            "samples_per_s": rounds * samples / elapsed[name],
+            "png_tiff_decodes_per_sample": decodes[name],
+        }
+        for name in datasets
+    }
+
+
+def _frame_ids(frames: list[dict[str, torch.Tensor]], keys: list[str]) -> torch.Tensor:
+    """One id per frame: equal ids iff the frames are bit-for-bit equal on every key."""
+    flat = torch.cat([torch.stack([f[k] for f in frames]).float().flatten(1) for k in keys], dim=1)
+    return torch.unique(flat, dim=0, return_inverse=True)[1]
+
+
+def equality_errors(reference: LeRobotDataset, stored: LeRobotDataset, keys: list[str]) -> dict[str, int]:
+    """False positives / negatives of frame equality in ``stored`` against ``reference`` (the same frames).
+
+    Both datasets must return images alike (float in [0, 1] for RGB, millimetres for depth).
+    """
+    out: Counter = Counter()
+    goals = [goal_key(k) for k in keys]
+    episodes = reference.meta.episodes
+    for ep in range(reference.meta.total_episodes):
+        start, end = episodes["dataset_from_index"][ep], episodes["dataset_to_index"][ep]
+        ref = [reference[i] for i in range(start, end)]
+        new = [stored[i] for i in range(start, end)]
+        for k in keys + goals:
+            out[f"frames_differing.{k}"] += sum(
+                not torch.equal(x[k], y[k]) for x, y in zip(ref, new, strict=True)
+            )
+        # Ids of the episode's frames and, last, of its recorded goal (stored under the goal keys).
+        ids = []
+        for frames in (ref, new):
+            goal = {k: frames[0][g] for k, g in zip(keys, goals, strict=True)}
+            ids.append(_frame_ids([*frames, goal], keys))
+        eq_ref, eq_new = (i[:, None] == i[None] for i in ids)
+        n = end - start
+        pairs = ~torch.eye(n, dtype=torch.bool)  # o_{t+1} against another frame o_{t'} of the episode
+        for name, ref_eq, new_eq in (
+            ("frame_pairs", eq_ref[:n, :n][pairs], eq_new[:n, :n][pairs]),
+            ("frame_vs_goal", eq_ref[n, :n], eq_new[n, :n]),
+        ):
+            out[f"{name}_compared"] += ref_eq.numel()
+            out[f"{name}_equal_in_reference"] += int(ref_eq.sum())
+            out[f"{name}_false_positives"] += int((new_eq & ~ref_eq).sum())
+            out[f"{name}_false_negatives"] += int((ref_eq & ~new_eq).sum())
+    return dict(out)
+
+
+def copy_as_video(source: LeRobotDataset, repo_id: str, root, **encoders) -> LeRobotDataset:
+    """``source``'s episodes re-written with its camera keys as video (LeRobot's default encoders unless
+    ``encoders`` gives ``rgb_encoder`` / ``depth_encoder``): the same frames under another storage."""
+    features = {
+        k: ({**ft, "dtype": "video"} if ft["dtype"] == "image" else ft)
+        for k, ft in source.meta.features.items()
+        if k not in ("timestamp", "frame_index", "episode_index", "index", "task_index")
+    }
+    copy = LeRobotDataset.create(
+        repo_id,
+        fps=source.fps,
+        features=features,
+        root=root,
+        use_videos=True,
+        video_backend="pyav",
+        **encoders,
+    )
+    episodes = source.meta.episodes
+    for ep in range(source.meta.total_episodes):
+        for i in range(episodes["dataset_from_index"][ep], episodes["dataset_to_index"][ep]):
+            item = source[i]
+            frame = {"task": item["task"]}
+            for key in features:
+                value = item[key]
+                if key in source.meta.depth_keys:
+                    frame[key] = value.permute(1, 2, 0).numpy().astype("uint16")
+                elif key in source.meta.camera_keys:
+                    frame[key] = (value * 255).round().to(torch.uint8).permute(1, 2, 0).numpy()
+                else:
+                    frame[key] = value.reshape(features[key]["shape"]).numpy()
+            copy.add_frame(frame)
+        copy.save_episode()
+    copy.finalize()
+    return LeRobotDataset(repo_id, root=root, video_backend="pyav")

@@ -1,0 +1,38 @@
+"""The frame-equality count behind the video-storage measurements (lerobot_indicator/bench/dataset_loading.py)."""
+
+from types import SimpleNamespace
+
+import torch
+
+from lerobot_indicator.bench.dataset_loading import equality_errors
+
+KEY, GOAL = "observation.images.front", "observation.images.goal_front"
+
+
+class FakeDataset:
+    """One episode of frames (value per pixel) with a constant goal frame, as LeRobotDataset indexes them."""
+
+    def __init__(self, values: list[float], goal: float):
+        self.items = [{KEY: torch.full((1, 2, 2), v), GOAL: torch.full((1, 2, 2), goal)} for v in values]
+        episodes = {"dataset_from_index": [0], "dataset_to_index": [len(values)]}
+        self.meta = SimpleNamespace(episodes=episodes, total_episodes=1)
+
+    def __getitem__(self, i: int) -> dict:
+        return self.items[i]
+
+
+def test_counts_false_positives_and_negatives_of_frame_equality():
+    # Frames 0 and 2 equal the goal in the reference. The stored copy decodes frame 1 like the others (four
+    # ordered false-positive pairs) and changes the goal (frames 0 and 2 no longer match it: two false negatives).
+    reference = FakeDataset([1.0, 2.0, 1.0], goal=1.0)
+    stored = FakeDataset([1.0, 1.0, 1.0], goal=1.5)
+    errors = equality_errors(reference, stored, [KEY])
+    assert errors["frame_pairs_compared"] == 6
+    assert errors["frame_pairs_equal_in_reference"] == 2  # (0, 2) and (2, 0)
+    assert errors["frame_pairs_false_positives"] == 4  # (0, 1), (1, 0), (1, 2), (2, 1)
+    assert errors["frame_pairs_false_negatives"] == 0
+    assert errors["frame_vs_goal_equal_in_reference"] == 2
+    assert errors["frame_vs_goal_false_negatives"] == 2
+    assert errors["frame_vs_goal_false_positives"] == 0
+    assert errors[f"frames_differing.{KEY}"] == 1 and errors[f"frames_differing.{GOAL}"] == 3
+    assert not any(v for k, v in equality_errors(reference, reference, [KEY]).items() if "false" in k)

@@ -27,6 +27,12 @@ METHODS: dict[str, list[str]] = {
     ],
 }
 PAPER_METHODS = list(METHODS)
+# The paper's learned-reward baselines (appendix), for image tasks only: an AE / beta-VAE trained jointly
+# with the agent gives the reward; goals are sampled as for the other methods without balancing.
+LEARNED_REWARD_METHODS = {
+    reward: [f"--policy.reward={reward}", "--policy.balance=false", "--policy.filter=false"]
+    for reward in ("ae", "vae")
+}
 # Variants of the paper's methods, each one flag away from it:
 # - the other reading of balancing at t = T-1 (no t' >= t+2): the recorded goal instead of o_{t+1};
 # - image inputs: the paper's encoder instead of the default ("drq", docs/policy.md), and float32 convs.
@@ -44,6 +50,27 @@ VARIANTS["indicator_balance_filter_fp32"] = [
     *METHODS["indicator_balance_filter"],
     "--policy.conv_precision=float32",
 ]
+# - n-step TD targets (docs/policy.md) and the inverse-dynamics loss on the shared image encoder.
+for _m in ("oracle", "indicator", "indicator_balance_filter"):
+    VARIANTS[f"{_m}_n3"] = [*METHODS[_m], "--policy.n_step=3"]
+VARIANTS["indicator_balance_filter_inverse_dynamics"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.inverse_dynamics=1.0",
+]
+VARIANTS["indicator_balance_filter_n3_inverse_dynamics"] = [
+    *VARIANTS["indicator_balance_filter_n3"],
+    "--policy.inverse_dynamics=1.0",
+]
+# The filter's options (docs/policy.md): Q from the target critic; filtering only in calibrated batches.
+VARIANTS["indicator_balance_filter_target_q"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.filter_q=target",
+]
+VARIANTS["indicator_balance_filter_calibrated"] = [
+    *METHODS["indicator_balance_filter"],
+    "--policy.filter_start=calibrated",
+]
+METHODS.update(LEARNED_REWARD_METHODS)
 METHODS.update(VARIANTS)
 LABELS = {
     "oracle": "Oracle",
@@ -55,6 +82,15 @@ LABELS = {
     "indicator_balance_filter_recorded_fallback": "Indicator+Balance+Filter (t=T-1: recorded goal)",
     "indicator_balance_filter_paper_encoder": "Indicator+Balance+Filter, paper encoder",
     "indicator_balance_filter_fp32": "Indicator+Balance+Filter, float32 convs",
+    "oracle_n3": "Oracle, 3-step targets",
+    "indicator_n3": "Indicator, 3-step targets",
+    "indicator_balance_filter_n3": "Indicator+Balance+Filter, 3-step targets",
+    "indicator_balance_filter_inverse_dynamics": "Indicator+Balance+Filter, inverse-dynamics loss",
+    "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
+    "indicator_balance_filter_target_q": "Indicator+Balance+Filter, filter Q from the target critic",
+    "indicator_balance_filter_calibrated": "Indicator+Balance+Filter, filter once Q is calibrated",
+    "ae": "AE",
+    "vae": "VAE",
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -67,6 +103,15 @@ STYLES = {
     "indicator_balance_filter_recorded_fallback": ("tab:brown", "-."),
     "indicator_balance_filter_paper_encoder": ("tab:gray", "--"),
     "indicator_balance_filter_fp32": ("tab:pink", ":"),
+    "oracle_n3": ("tab:cyan", "-"),
+    "indicator_n3": ("gold", "-"),
+    "indicator_balance_filter_n3": ("darkgreen", "-"),
+    "indicator_balance_filter_inverse_dynamics": ("tab:brown", ":"),
+    "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
+    "indicator_balance_filter_target_q": ("tab:cyan", "--"),
+    "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
+    "ae": ("black", "-"),
+    "vae": ("black", "--"),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 
@@ -81,23 +126,20 @@ class TaskPreset:
     eval_episodes: int = 20
 
 
+REACH_RGBD_ENV = [
+    "--env.type=sawyer_reach",
+    "--env.obs_type=rgbd",
+    "--env.camera.height=64",
+    "--env.camera.width=64",
+    RGBD_KEYS,
+]
 TASKS: dict[str, TaskPreset] = {
     "reach_state": TaskPreset(["--env.type=sawyer_reach", "--env.obs_type=state"], 1600, 40, 4, 200),
-    # From pixels only, 64x64 RGB-D: 8000 updates = 20,000 env steps.
-    "reach_rgbd": TaskPreset(
-        [
-            "--env.type=sawyer_reach",
-            "--env.obs_type=rgbd",
-            "--env.camera.height=64",
-            "--env.camera.width=64",
-            RGBD_KEYS,
-        ],
-        8000,
-        40,
-        4,
-        400,
-        20,
-    ),
+    # From pixels only, 64x64 RGB-D: 20,000 updates = 20,000 env steps (one update per env step: the Oracle
+    # learns faster per env step than at 0.4, Indicator+Balance+Filter does not; docs/results/README.md).
+    "reach_rgbd": TaskPreset(REACH_RGBD_ENV, 20000, 100, 4, 1000, 20),
+    # The same at 0.4 updates per env step (the state task's ratio): 8000 updates = 20,000 env steps.
+    "reach_rgbd_low_utd": TaskPreset(REACH_RGBD_ENV, 8000, 40, 4, 400, 20),
     "rope_state": TaskPreset(
         ["--env.type=rope_push", "--env.obs_type=state", "--policy.observation_keys=[observation.rope_xy]"],
         6000,

@@ -13,7 +13,6 @@ costs in lerobot-train. Writes a JSON record (default ``docs/results/policy_upda
 import argparse
 import json
 import os
-import platform
 import shlex
 import sys
 import time
@@ -22,6 +21,7 @@ from pathlib import Path
 import torch
 
 from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
+from lerobot_indicator.bench.records import cpu_model
 from lerobot_indicator.bench.updates import (
     STATE_FEATURES,
     interleaved_rates,
@@ -125,15 +125,6 @@ def bench_dataset(seconds: float) -> dict:
             elapsed = time.perf_counter() - start
             out[str(deltas)] = {"samples_per_s": n / elapsed, "frames_per_sample_per_image_key": len(deltas)}
     return out
-
-
-def cpu_model() -> str:
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        for line in cpuinfo.read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor() or platform.machine()
 
 
 def main() -> None:

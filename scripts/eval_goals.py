@@ -24,6 +24,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
 from lerobot.policies.factory import make_pre_post_processors
 
+from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 from lerobot_indicator.training.rollout import Processors, run_episodes, stored_keys
@@ -107,9 +108,7 @@ def main(cfg: EvalGoalsConfig) -> dict:
         print(
             f"seed {r['seed']}: final {r['final_distance']:.3f} goal {r['gt_goal']} clipped {r['clipped_goal_dims']}"
         )
-    if cfg.out is not None:
-        cfg.out.parent.mkdir(parents=True, exist_ok=True)
-        cfg.out.write_text(json.dumps(record, indent=2) + "\n")
+    write_json(cfg.out, record)
     return record
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from lerobot.envs import make_env
 from lerobot.envs.configs import EnvConfig
 
+from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
 
 
@@ -50,9 +51,7 @@ def main(cfg: StartDistanceConfig) -> dict:
         "start_distances": distances,
     }
     print(json.dumps({k: v for k, v in record.items() if k != "start_distances"}, indent=1))
-    if cfg.out is not None:
-        cfg.out.parent.mkdir(parents=True, exist_ok=True)
-        cfg.out.write_text(json.dumps(record, indent=2) + "\n")
+    write_json(cfg.out, record)
     return record
 
 

@@ -85,3 +85,37 @@ def test_sb3_ddpg_her_runs_on_the_reach_env():
     assert (expected == 1.0).any()  # some relabeled goals are reached (HER at work)
     action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
     assert action.shape == (3,) and np.all(np.abs(action) <= 1)
+
+
+def test_eval_curve_hooks_exclude_evaluation_time(monkeypatch):
+    from lerobot_indicator.bench import vs_sb3
+    from lerobot_indicator.training.hooks import PhaseEnd
+
+    clock = iter([10.0, 15.0, 30.0])  # first cycle start, first eval end, second eval end
+    monkeypatch.setattr(vs_sb3.time, "perf_counter", lambda: next(clock))
+    timing = vs_sb3.EvalCurve()
+    hooks = timing.hooks()
+    hooks.on_cycle_start(0)
+    hooks.on_collect_end(PhaseEnd(0, 0, 50, 1.0), [])
+    hooks.on_update_end(PhaseEnd(0, 40, 50, 2.0), {})
+    hooks.on_eval_end(PhaseEnd(0, 40, 50, 3.0), {"eval_success_rate": 0.5})  # evaluated from 12 to 15
+    hooks.on_cycle_start(1)
+    hooks.on_update_end(PhaseEnd(1, 80, 100, 2.5), {})
+    hooks.on_eval_end(PhaseEnd(1, 80, 100, 4.0), {"eval_success_rate": 1.0})  # from 26 to 30
+    assert [c["train_wall_s"] for c in timing.curve] == [2.0, 26.0 - 10.0 - 3.0]
+    assert [(c["env_steps"], c["updates"]) for c in timing.curve] == [(50, 40), (100, 80)]
+    assert (timing.collect_s, timing.optimise_s, timing.eval_s) == (1.0, 4.5, 7.0)
+
+
+def test_our_learners_are_the_package_presets(tmp_path):
+    from lerobot_indicator.bench import vs_sb3
+    from lerobot_indicator.presets import METHODS
+
+    s = vs_sb3.Settings(env_steps=500, eval_every=250)
+    for learner, preset in vs_sb3.OURS.items():
+        cfg = vs_sb3.ours_config(learner, 0, s, tmp_path / learner, s.steps())
+        flags = dict(f.removeprefix("--policy.").split("=") for f in METHODS[preset])
+        assert {k: str(getattr(cfg.policy, k)).lower() for k in flags} == flags
+        assert cfg.steps == 500 * 40 // (2 * 25) and cfg.env_eval_freq == 250 * 40 // (2 * 25)
+    with pytest.raises(ValueError, match=r"multiples of one cycle \(50 env steps\)"):
+        vs_sb3.Settings(eval_every=260).validate()

@@ -49,3 +49,33 @@ def test_localization_probe_reports_a_test_error_curve(tmp_path):
     probe = localization_probe(run, 20, 24, horizon=5, batch_size=16, every=10, hidden_dims=[8])
     assert probe["frames"] == 30 * 6 and [c["updates"] for c in probe["curve"]] == [10, 20]
     assert all(c["test_error_mean_m"] > 0 for c in probe["curve"])
+
+
+def test_feature_probe_finds_a_linear_position_and_none_in_noise(tmp_path):
+    """The probe regresses the run's own encoder features: exact where the position is a linear function of
+    them, no better than the spread where it is unrelated noise."""
+    import torch
+
+    from lerobot_indicator.bench.critic_fit import feature_probe
+    from lerobot_indicator.bench.updates import make_policy, rgbd_features
+
+    episodes, horizon, size = 30, 5, 24
+    run = fake_run(tmp_path, episodes=episodes, horizon=horizon, size=size)
+    policy = make_policy(rgbd_features(size), horizon=horizon, hidden_dims=[8])
+    policy.save_pretrained(run / "checkpoints" / "last" / "pretrained_model")
+    path = run / "replay" / "cycle_0000000.npz"
+    chunk = dict(np.load(path))
+    frames = {k[4:]: torch.from_numpy(v.reshape(-1, *v.shape[2:])) for k, v in chunk.items() if "images" in k}
+    with torch.no_grad():
+        obs = policy.critic.encoder({k: v for k, v in frames.items() if "goal" not in k}).double().numpy()
+    w = np.random.default_rng(1).normal(size=(obs.shape[1], 3)) * 0.05
+    chunk["gt_achieved"] = (obs @ w).reshape(episodes, horizon + 1, 3).astype(np.float32)
+    np.savez(path, **chunk)
+    linear = feature_probe(run, horizon=horizon)
+    assert linear["episodes"] == episodes and linear["feature_dim"] == obs.shape[1]
+    assert linear["ee_error_mean_m"] < 0.02 * linear["ee_spread_m"], linear
+
+    chunk["gt_achieved"] = np.random.default_rng(2).normal(size=chunk["gt_achieved"].shape).astype(np.float32)
+    np.savez(path, **chunk)
+    noise = feature_probe(run, horizon=horizon)
+    assert noise["ee_error_mean_m"] > 0.8 * noise["ee_spread_m"], noise

@@ -187,11 +187,12 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
 def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):
     """Per-source counts add up, o_{t+1} goals are always indicator and ground-truth positives, recorded goals
     are never indicator positives here, and what the filter drops is a subset of the R- transitions."""
-    diagnostics = _import_script("filter_diagnostics")
+    from lerobot_indicator.bench import filter_diagnostics as diagnostics
+
     cfg = diagnostics.FilterDiagnosticsConfig(
         run_dirs=[trained_run], batches=3, batch_size=64, out=tmp_path / "fd.json"
     )
-    record = diagnostics.main(cfg)
+    record = diagnostics.run(cfg)
     assert json.loads((tmp_path / "fd.json").read_text()) == json.loads(json.dumps(record))
     (run,) = record["runs"].values()
     assert list(run["steps"]) == [5] and run["balance"] and run["filter"]
@@ -208,4 +209,4 @@ def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):
         assert source["dropped_gt_success"] <= min(source["dropped"], source["gt_success"])
 
     with pytest.raises(ValueError, match="run_dirs"):
-        diagnostics.main(diagnostics.FilterDiagnosticsConfig())
+        diagnostics.run(diagnostics.FilterDiagnosticsConfig())

@@ -15,13 +15,13 @@ from torch import nn
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
-from lerobot_indicator.training.online import to_transition_batch
+from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 
 STATE, GOAL = "observation.state", "observation.goal_state"
 VEL, GOAL_VEL = "observation.velocity", "observation.goal_velocity"
 T = 4
-RTOL, ATOL = 1e-5, 1e-6  # the CPU tanh is 2 sigmoid(2x) - 1: max abs error 2e-7 against torch.tanh
+RTOL, ATOL = 1e-5, 1e-6  # float32 sums in a different order than the reference computation
 REWARDS = [(1.0, -1.0), (0.0, -1.0)]
 
 # ----------------------------------------------------------------------------------------------- helpers
@@ -448,6 +448,14 @@ def test_update_moves_each_target_toward_its_online_network_with_tau():
     assert float(policy.target_actor.encoder.std_0) == 2.0
 
 
+def test_soft_update_refuses_networks_whose_buffers_do_not_pair_up():
+    """A target with a buffer its online network lacks is not that network's copy: refused, not half-synced."""
+    online, target = nn.Linear(1, 1), nn.Linear(1, 1)
+    target.register_buffer("extra", torch.zeros(1))
+    with pytest.raises(ValueError):
+        core.soft_update(target, online, 0.98)
+
+
 # --------------------------------------------------------------------------------- 5. indicator reward
 
 
@@ -699,3 +707,102 @@ def test_packed_replay_recorded_goal_reached_gets_r_plus():
     reward = core.indicator_reward({STATE: batch[core.NEXT + STATE]}, goal, 1.0, -1.0)
     assert bool((reward[rows] == 1.0).all())
     torch.testing.assert_close(goal[STATE][rows].float(), torch.full((int(rows.sum()), 1), 3 / 255))
+
+
+# ------------------------------------------------------------------------------ 9. reward statistics
+
+# (ground-truth success, reward R+, kept by the filter, valid) per row, and how many rows of each: the
+# statistics below are counted by hand from this table.
+ROW_KINDS = [
+    ((True, True, True, True), 1),  # a true positive
+    ((True, False, True, True), 2),  # false negatives the filter kept
+    ((True, False, False, True), 1),  # a false negative the filter dropped
+    ((False, True, True, True), 1),  # a false positive
+    ((False, False, False, True), 3),  # true negatives the filter dropped
+    ((False, False, True, True), 2),  # true negatives kept
+    ((True, True, True, False), 1),  # invalid rows (no o_{t+1}): never counted
+    ((False, False, False, False), 1),
+    ((True, False, True, False), 1),
+]
+
+
+def statistics_inputs(kinds) -> tuple[torch.Tensor, ...]:
+    """Ground truth 1-d: goal 3 + row/4, achieved at distance 0.5 (= epsilon: a success, the boundary) for
+    the first success row, 0.25 for the other successes, 2 for failures."""
+    rows = [kind for kind, n in kinds for _ in range(n)]
+    success, positive, keep, valid = (torch.tensor(c) for c in zip(*rows, strict=True))
+    goal = 3 + torch.arange(len(rows), dtype=torch.float32)[:, None] / 4
+    distance = torch.where(success, 0.25, 2.0)
+    distance[int(success.nonzero()[0])] = 0.5
+    reward = torch.where(positive, 1.0, -1.0)
+    return reward, goal + distance[:, None], goal, keep, valid
+
+
+def test_ground_truth_success_is_distance_to_the_goal_at_most_epsilon():
+    goal = torch.tensor([[3.0, -2.0], [3.0, -2.0], [3.0, -2.0], [1.0, 1.0]])
+    achieved = goal + torch.tensor([[0.375, 0.5], [0.375, 0.5001], [0.0, 0.0], [0.0, -0.5]])  # |d| = 0.625...
+    assert core.ground_truth_success(achieved, goal, 0.625).tolist() == [True, False, True, True]
+
+
+def test_reward_statistics_count_each_kind_of_row():
+    reward, gt_next, gt_goal, keep, valid = statistics_inputs(ROW_KINDS)
+    cfg = make_policy(oracle_epsilon=0.5).config
+    stats = core.reward_statistics(reward, gt_next, gt_goal, keep, valid, cfg)
+    # 10 valid rows: 4 successes (3 of them R-), 6 failures (1 of them R+); 6 rewards agree with the truth;
+    # the filter kept 3 successes (2 of them R-) and dropped 4 rows, 1 of them a success.
+    expected = {
+        "reward_accuracy": 6 / 10,
+        "false_negative_rate": 3 / 4,
+        "false_positive_rate": 1 / 6,
+        "false_negative_rate_kept": 2 / 3,
+        "frac_gt_positive": 4 / 10,
+        "filtered_gt_success_rate": 1 / 4,
+    }
+    assert {k: round(float(v), 6) for k, v in stats.items()} == {k: round(v, 6) for k, v in expected.items()}
+
+
+@pytest.mark.parametrize(
+    "kinds, expected",
+    [
+        # one kept false negative and one false positive: each rate is 1 of 1, nothing filtered
+        ([((True, False, True, True), 1), ((False, True, True, True), 1)], [0.0, 1.0, 1.0, 1.0, 0.5, 0.0]),
+        # one dropped false negative and one false positive: no kept success, the one filtered row a success
+        ([((True, False, False, True), 1), ((False, True, True, True), 1)], [0.0, 1.0, 1.0, 0.0, 0.5, 1.0]),
+        # no valid success and nothing filtered: the empty rates are 0
+        ([((False, False, True, True), 2), ((True, True, True, False), 1)], [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+    ],
+)
+def test_reward_statistics_rates_over_a_single_row_and_over_none(kinds, expected):
+    reward, gt_next, gt_goal, keep, valid = statistics_inputs(kinds)
+    cfg = make_policy(oracle_epsilon=0.5).config
+    stats = core.reward_statistics(reward, gt_next, gt_goal, keep, valid, cfg)
+    assert [float(v) for v in stats.values()] == expected
+
+
+def test_loss_reports_reward_statistics_of_its_own_rewards_filter_and_valid_rows(monkeypatch):
+    """The loss hands reward_statistics its reward, o_{t+1}'s ground truth, the chosen goal's, the filter's
+    keep mask and next.valid (the recorded goal for every row: p_next = p_future = 0)."""
+    policy = make_policy(p_next=0.0, p_future=0.0, oracle_epsilon=0.5)
+    set_policy_weights(policy)
+    batch = batch_of(OBS, NXT, GOALS, ACT)
+    batch[core.NEXT_VALID] = torch.tensor([True, True, False, True, True, True])
+    batch[core.GT_NEXT_ACHIEVED] = col(NXT)
+    batch[core.GT_FUTURE_ACHIEVED] = col([9.0] * len(OBS))
+    batch[core.GT_DESIRED] = col(GOALS)
+    seen = {}
+    original = core.reward_statistics
+
+    def spy(reward, gt_next, gt_goal, keep, valid, config):
+        seen.update(reward=reward, gt_next=gt_next, gt_goal=gt_goal, keep=keep, valid=valid)
+        return original(reward, gt_next, gt_goal, keep, valid, config)
+
+    monkeypatch.setattr(core, "reward_statistics", spy)
+    _, stats = policy.forward(batch, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(seen["reward"], torch.where(torch.tensor(POSITIVE_ROWS), 1.0, -1.0))
+    assert torch.equal(seen["gt_next"], col(NXT)) and torch.equal(seen["gt_goal"], col(GOALS))
+    assert torch.equal(seen["valid"], batch[core.NEXT_VALID])
+    assert seen["keep"].dtype == torch.bool and not bool(seen["keep"][2])
+    # |NXT - GOALS| <= 0.5 on rows 0, 2, 3, 4; row 2 is invalid; row 4 (distance 0.1) is an oracle success
+    # the indicator reward misses: 3 successes among 5 valid rows, 1 of them R-.
+    assert stats["frac_gt_positive"] == pytest.approx(3 / 5)
+    assert stats["false_negative_rate"] == pytest.approx(1 / 3)

@@ -188,11 +188,14 @@ def test_online_rollouts_are_recorded_as_a_lerobot_dataset(tmp_path, monkeypatch
 
 
 KILLED_AT_CALL = """
-import os, sys
+import importlib, os, sys
 from lerobot_indicator.training import online
 
-method, call_index = os.environ["KILL_AT"].split(":")
-original, calls = getattr(online.OnlineTrainer, method), []
+# KILL_AT = module:Class.method:N raises KeyboardInterrupt at the N-th call of that method.
+module, method, call_index = os.environ["KILL_AT"].split(":")
+owner_name, method = method.split(".")
+owner = getattr(importlib.import_module(module), owner_name)
+original, calls = getattr(owner, method), []
 
 
 def killed(self, *args):
@@ -202,7 +205,7 @@ def killed(self, *args):
     return original(self, *args)
 
 
-setattr(online.OnlineTrainer, method, killed)
+setattr(owner, method, killed)
 sys.argv = ["lerobot-indicator-train", *sys.argv[1:]]
 online.main()
 """
@@ -213,10 +216,10 @@ online.main()
     [
         # Cycle 1's episodes are recorded and checkpointed, its resume state is not saved: the resumed run
         # replays cycle 1 and must skip the episode the dataset already has.
-        ("0", "_save_resume_state:2"),
+        ("0", "lerobot_indicator.training.run_state:RunDir.save_state:2"),
         # Dataset checkpoint + resume state only after cycle 0; killed while training cycle 2: the dataset
         # rolls back to its checkpoint and cycles 1-2 are replayed and recorded once.
-        ("3600", "optimise:3"),
+        ("3600", "lerobot_indicator.training.online:OnlineTrainer.optimise:3"),
     ],
 )
 def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoint_every_s, kill_at):
@@ -328,3 +331,46 @@ def test_record_flags_parse(tmp_path):
     )
     cfg.validate()
     assert cfg.record == OnlineRecordConfig("local/x", str(tmp_path / "ds"), True, 5.0)
+
+
+def test_hooks_see_every_phase_with_its_result(tmp_path):
+    """Hooks get each cycle's phases in loop order, with what the phase produced and its duration."""
+    import draccus
+
+    from lerobot_indicator.training.config import OnlineTrainConfig
+    from lerobot_indicator.training.hooks import TrainerHooks
+    from lerobot_indicator.training.online import OnlineTrainer
+
+    cfg = draccus.parse(
+        OnlineTrainConfig,
+        args=[*TINY, *ENVS["sawyer_reach"], f"--output_dir={tmp_path}", "--steps=10", "--env_eval_freq=10"],
+    )
+    cfg.validate()
+    events = []
+
+    def hook(name):
+        return lambda *args: events.append((name, *args))
+
+    hooks = TrainerHooks(**{n: hook(n) for n in TrainerHooks.__dataclass_fields__})
+    trainer = OnlineTrainer(cfg, hooks)
+    try:
+        trainer.train()
+    finally:
+        trainer.close()
+    names = [e[0] for e in events]
+    cycle = ["on_cycle_start", "on_collect_end", "on_update_end"]
+    assert names == [*cycle, "on_cycle_end", *cycle, "on_eval_end", "on_cycle_end"]
+    rows = _metrics(tmp_path)
+    ends = [e for e in events if e[0] == "on_cycle_end"]
+    assert [e[2] for e in ends] == rows  # the metrics.jsonl lines, as written
+    updates = [e for e in events if e[0] == "on_update_end"]
+    assert [u[1].step for u in updates] == [5, 10]
+    assert [u[2]["critic_loss"] for u in updates] == [r["critic_loss"] for r in rows]
+    (collect,) = [e for e in events if e[0] == "on_collect_end" and e[1].cycle == 1]
+    assert collect[2][0].actions.shape == (1, 5, 3)  # one episode of T = 5
+    (evaluation,) = [e for e in events if e[0] == "on_eval_end"]
+    assert evaluation[2]["eval_success_rate"] == rows[-1]["eval_success_rate"]
+    for _, phase, *_ in (e for e in events if e[0] != "on_cycle_start"):
+        assert phase.seconds > 0
+    phases = sum(e[1].seconds for e in events if e[0] in ("on_collect_end", "on_update_end", "on_eval_end"))
+    assert phases < sum(e[1].seconds for e in ends)

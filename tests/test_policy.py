@@ -289,21 +289,6 @@ def test_learns_goal_reaching_from_random_walks_with_indicator_rewards(one_threa
     assert success_rate() >= 0.9
 
 
-@pytest.mark.parametrize(("compiled", "atol"), [(False, 3e-7), (True, 5e-7)])
-def test_cpu_tanh_matches_torch_tanh_and_its_gradient(compiled, atol):
-    """Both CPU formulas (eager sigmoid form, compiled rational approximation) are tanh to float precision."""
-    from lerobot_indicator.policy.networks_indicator_ddpg import tanh
-
-    fn = torch.compile(tanh, dynamic=False) if compiled else tanh
-    x = torch.cat([torch.linspace(-20, 20, 4001), torch.tensor([0.0, 1e-30, -1e-30])]).requires_grad_()
-    y = fn(x)
-    exact = torch.tanh(x.detach().double())
-    torch.testing.assert_close(y.double(), exact, atol=atol, rtol=0)
-    assert y.abs().max() <= 1.0
-    (grad,) = torch.autograd.grad(y, x, torch.ones_like(y))
-    torch.testing.assert_close(grad.double(), 1 - exact**2, atol=1e-6, rtol=0)
-
-
 def test_compiled_loss_matches_eager_loss_and_gradients():
     """``compile_model=True`` must change speed only: same relabeling draws, loss, stats and gradients."""
     cfg = make_config({STATE: vec(), GOAL: vec()}, future_offsets=[2, 4], oracle_epsilon=0.5)

@@ -1,6 +1,7 @@
 """Sawyer reach env: spaces, solvability, bit-exact goal observations, determinism."""
 
 import os
+from contextlib import closing
 
 import numpy as np
 import pytest
@@ -24,16 +25,14 @@ def scripted_action(obs):
 
 @pytest.fixture(scope="module")
 def state_env():
-    env = SawyerReachEnv(obs_type="state")
-    yield env
-    env.close()
+    with closing(SawyerReachEnv(obs_type="state")) as env:
+        yield env
 
 
 @pytest.fixture(scope="module")
 def rgbd_env():
-    env = SawyerReachEnv(obs_type="rgbd", camera=SMALL_CAMERA)
-    yield env
-    env.close()
+    with closing(SawyerReachEnv(obs_type="rgbd", camera=SMALL_CAMERA)) as env:
+        yield env
 
 
 def test_registered_gym_id_builds_with_time_limit():

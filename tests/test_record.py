@@ -60,6 +60,12 @@ def record_tiny(root: Path, obs_type="rgbd", task="sawyer_reach", **kwargs) -> L
     return record(cfg)
 
 
+def resume_cfg(root: Path, env=None, repo_id: str = "test/sawyer_reach_state", **kwargs) -> RecordConfig:
+    """Settings that continue the dataset at ``root`` with one more episode (state reach by default)."""
+    env = env or env_cfg(obs_type="state")
+    return RecordConfig(env=env, repo_id=repo_id, root=root, num_episodes=1, resume=True, **kwargs)
+
+
 def load_offline(root: Path, repo_id: str, monkeypatch, **kwargs) -> LeRobotDataset:
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     monkeypatch.setattr(hf_constants, "HF_HUB_OFFLINE", True)
@@ -313,15 +319,7 @@ def test_killed_recording_is_readable_as_it_is_and_resumes(tmp_path, monkeypatch
     assert sorted({int(e) for e in ds.hf_dataset["episode_index"][: len(ds)]}) == list(range(kept))
 
     monkeypatch.setenv("HF_HUB_OFFLINE", "0")
-    cfg = RecordConfig(
-        env=env_cfg(obs_type="state"),
-        repo_id="test/killed",
-        root=root,
-        policy="random",
-        num_episodes=1,
-        resume=True,
-    )
-    record(cfg)
+    record(resume_cfg(root, repo_id="test/killed", policy="random"))
     ds = load_offline(root, "test/killed", monkeypatch)
     assert ds.num_episodes >= kept + 1 and len(ds) == ds.num_episodes * F  # + a commit the kill cut short
     assert all(torch.equal(ds[i]["action"], a) for i, a in enumerate(before))
@@ -354,28 +352,13 @@ def test_resume_with_other_env_settings_is_an_error(tmp_path):
     root = tmp_path / "ds"
     record_tiny(root, "state", num_episodes=1)
     digest = tree_digest(root)
-    cfg = RecordConfig(
-        env=SawyerReachEnvConfig(obs_type="state", episode_length=T + 2),
-        repo_id="test/sawyer_reach_state",
-        root=root,
-        num_episodes=1,
-        resume=True,
-    )
     with pytest.raises(ValueError) as err:
-        record(cfg)
+        record(resume_cfg(root, SawyerReachEnvConfig(obs_type="state", episode_length=T + 2)))
     message = str(err.value)
     assert f"env.episode_length: dataset {T}, given {T + 2}" in message and "\n" not in message
     assert tree_digest(root) == digest
-    cfg = RecordConfig(
-        env=env_cfg(obs_type="state"),
-        repo_id="test/sawyer_reach_state",
-        root=root,
-        num_episodes=1,
-        resume=True,
-    )
-    cfg.r_neg = -2.0
     with pytest.raises(ValueError, match="r_neg: dataset -1.0, given -2.0"):
-        record(cfg)
+        record(resume_cfg(root, r_neg=-2.0))
     assert tree_digest(root) == digest
 
 
@@ -512,15 +495,8 @@ def test_resume_with_other_features_is_an_error(tmp_path):
     root = tmp_path / "ds"
     record_tiny(root, "state", num_episodes=1)
     digest = tree_digest(root)
-    cfg = RecordConfig(
-        env=env_cfg(obs_type="rgbd"),
-        repo_id="test/sawyer_reach_state",
-        root=root,
-        num_episodes=1,
-        resume=True,
-    )
     with pytest.raises(ValueError, match="other features"):
-        record(cfg)
+        record(resume_cfg(root, env_cfg(obs_type="rgbd")))
     assert tree_digest(root) == digest
 
 

@@ -106,6 +106,7 @@ def test_observation_stats_cover_frames_and_goals_of_the_stored_episodes():
     np.testing.assert_allclose(stats["observation.state"]["std"], state.std(0), rtol=1e-6)
     image = np.concatenate([_frames_and_goal(e, "observation.images.front") for e in range(3)])
     assert stats["observation.images.front"]["mean"].shape == (3, 1, 1)
+    assert {a.dtype for s in stats.values() for a in s.values()} == {np.dtype(np.float32)}  # LeRobot's stats
     np.testing.assert_allclose(
         stats["observation.images.front"]["mean"][:, 0, 0], image.mean((0, 2, 3)), rtol=1e-6
     )

@@ -3,6 +3,7 @@ hidden goal pushes are replayable, bad caches fail clearly, and LeRobot's env pa
 
 import json
 import os
+from contextlib import closing
 
 import numpy as np
 import pytest
@@ -23,9 +24,8 @@ NO_OP = np.zeros(4)
 
 @pytest.fixture(scope="module")
 def state_env():
-    env = RopePushEnv(obs_type="state")
-    yield env
-    env.close()
+    with closing(RopePushEnv(obs_type="state")) as env:
+        yield env
 
 
 @pytest.fixture(scope="module")

@@ -74,12 +74,12 @@ class RecordConfig:
     root: Path | None = None
     # random | scripted | noisy_scripted | path of a pretrained policy directory.
     policy: str = "scripted"
-    num_episodes: int = 10
+    num_episodes: int = 10  # to record in this run (with resume: to add)
     # Continue an existing dataset at root (required if it exists; nothing is ever overwritten).
     resume: bool = False
     # False: lossless PNG/TIFF frames (exact indicator comparisons). True: MP4 (lossy, small).
     use_videos: bool = False
-    seed: int = 0
+    seed: int = 0  # episode e resets the env with seed + e
     # Gaussian action noise (action units) of noisy_scripted.
     noise_std: float = 0.3
     # Observation keys the indicator reward compares; default: the cameras if any, else the state.

@@ -184,7 +184,10 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
     @property
     def renderer(self):
         if self._renderer is None:
-            self._renderer = self._renderer_cls(self.model, self.camera_cfg.width, self.camera_cfg.height)
+            s = self.camera_cfg.supersample
+            self._renderer = self._renderer_cls(
+                self.model, self.camera_cfg.width * s, self.camera_cfg.height * s
+            )
         return self._renderer
 
     def save_state(self) -> np.ndarray:
@@ -197,11 +200,24 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         self._mj.mj_setState(self.model, self.data, state, self._state_spec)
         self._mj.mj_forward(self.model, self.data)
 
+    def camera_observation(self) -> dict[str, np.ndarray]:
+        """The camera images of the current simulator state, keyed as in the observation (no goal images)."""
+        return self._camera_obs()
+
+    def _render_camera(self, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """(RGB, depth in metres or None) at the camera's size: rendered ``supersample`` times larger and
+        area-averaged down when asked (depth averaged in metres, before the sensor's range test)."""
+        from lerobot_indicator.envs.rendering import area_downsample
+
+        s = self.camera_cfg.supersample
+        rgb, depth_m = self.renderer.render(self.data, self.camera_cfg.name, depth=depth)
+        return area_downsample(rgb, s), None if depth_m is None else area_downsample(depth_m, s)
+
     def _camera_obs(self, prefix: str = "") -> dict[str, np.ndarray]:
         if self.obs_type == "state":
             return {}
         cam = self.camera_cfg
-        rgb, depth_m = self.renderer.render(self.data, cam.name, depth=self.obs_type == "rgbd")
+        rgb, depth_m = self._render_camera(depth=self.obs_type == "rgbd")
         out = {prefix + cam.name: rgb}
         if depth_m is not None:
             from lerobot_indicator.envs.rendering import metres_to_uint16_mm
@@ -251,7 +267,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
 
     def render(self) -> np.ndarray:
         """HxWx3 uint8 frame of the task camera (eval videos)."""
-        rgb, _ = self.renderer.render(self.data, self.camera_cfg.name, depth=False)
+        rgb, _ = self._render_camera(depth=False)
         return rgb
 
     def close(self) -> None:

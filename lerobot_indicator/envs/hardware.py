@@ -32,6 +32,9 @@ class GoalCameraConfig:
     # Camera pose in the sim world frame (metres); the real camera's pose is wherever it is mounted.
     pos: list[float] = field(default_factory=lambda: [1.0, 1.0, 1.5])
     lookat: list[float] = field(default_factory=lambda: [-0.15, 0.0, 1.08])
+    # Simulation only: render at supersample x (height, width) and average each supersample x supersample block
+    # (area averaging, anti-aliasing) down to (height, width); the observation keeps its size and dtypes.
+    supersample: int = 1
 
     def __post_init__(self):
         if self.type not in CAMERA_TYPES:
@@ -54,6 +57,12 @@ class GoalCameraConfig:
         for key in ("pos", "lookat"):
             if len(getattr(self, key)) != 3:
                 raise ValueError(f"camera.{key} must have 3 numbers, got {getattr(self, key)}")
+        if int(self.supersample) < 1:
+            raise ValueError(f"camera.supersample must be >= 1, got {self.supersample}")
+        if self.type == "intelrealsense" and self.supersample != 1:
+            raise ValueError(
+                "camera.supersample is a simulation render option: it must be 1 for 'intelrealsense'"
+            )
         if self.type == "intelrealsense" and not self.serial_number_or_name:
             raise ValueError("camera.serial_number_or_name is required for type 'intelrealsense'")
 

@@ -19,6 +19,18 @@ MM_PER_M = 1000.0
 UINT16_MAX = np.iinfo(np.uint16).max
 
 
+def area_downsample(image: np.ndarray, factor: int) -> np.ndarray:
+    """(H*factor, W*factor, ...) -> (H, W, ...): the mean of each factor x factor block (what torch's
+    ``F.interpolate(mode="area")`` computes for an integer factor), rounded back for integer images."""
+    if factor == 1:
+        return image
+    h, w = image.shape[0] // factor, image.shape[1] // factor
+    blocks = image.reshape(h, factor, w, factor, *image.shape[2:]).mean(axis=(1, 3))
+    if np.issubdtype(image.dtype, np.integer):
+        return np.rint(blocks).astype(image.dtype)
+    return blocks.astype(image.dtype)
+
+
 def metres_to_uint16_mm(depth_m: np.ndarray, depth_min_m: float, depth_max_m: float) -> np.ndarray:
     """RealSense-style depth: uint16 millimetres, 0 where the depth is outside the sensor's range."""
     valid = (depth_m >= depth_min_m) & (depth_m <= depth_max_m)

@@ -9,7 +9,11 @@ from lerobot.utils.constants import ACTION
 
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 
-REWARD_MODES = ("indicator", "oracle")
+# "ae" / "vae": the paper's learned-reward baselines (policy/learned_reward.py).
+LEARNED_REWARDS = ("ae", "vae")
+REWARD_MODES = ("indicator", "oracle", *LEARNED_REWARDS)
+FILTER_Q_SOURCES = ("online", "target")
+FILTER_STARTS = ("always", "calibrated")
 BALANCE_FALLBACKS = ("recorded", "next")
 # Per image encoder: the values of the conv and augmentation fields left at None. "paper": the appendix's
 # 4 conv layers of 2x2 kernels, stride 2, 16/32/64/64 filters (as in the authors' HER code), no augmentation.
@@ -69,7 +73,9 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # of the dataset (lerobot-train) or of the env (lerobot-indicator-train); a given value must match it.
     horizon: int | None = None
 
-    # Reward: "indicator" (the paper's method) or "oracle" (ground-truth distance <= oracle_epsilon).
+    # Reward: "indicator" (the paper's method), "oracle" (ground-truth distance <= oracle_epsilon), or a
+    # learned-reward baseline trained jointly on the batch's images (paper appendix): "ae" (max(0, cosine of
+    # the L2-normalised codes)) or "vae" (beta-VAE, -||z - z_g|| of the posterior means).
     reward: str = "indicator"
     oracle_epsilon: float = 0.1
     positive_reward: float = 1.0
@@ -88,6 +94,14 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     balance_fallback: str = "next"
     # Reward filtering: drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
     filter: bool = True
+    # The filter's Q: "online" (the paper: the critic being trained) or "target" (the target critic, which
+    # trails it and is not pulled up by the batch it filters).
+    filter_q: str = "online"
+    # When the filter acts: "always" (the paper) or "calibrated": in a batch only when at least
+    # filter_calibration of its R+ transitions (relabeled positives, whose return is known to be high) have a
+    # filter Q above q0, i.e. once the critic tells positives from negatives at the threshold q0.
+    filter_start: str = "always"
+    filter_calibration: float = 0.9
     # Initial Q (the critic's output bias). The paper initialises Q "relatively low" so that filtering
     # is not fooled early; None = R-/(1-gamma), the lowest possible return. Any value well below q0 keeps
     # filtering safe; see docs/policy.md for the effect on learning speed.
@@ -129,10 +143,24 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # RopePush: spatial softmax with 32 keypoints before the fully connected layers.
     spatial_softmax: bool = False
     spatial_softmax_keypoints: int = 32
+    # Learned-reward baselines ("ae", "vae"): 3x3 convs each followed by 2x2 max-pooling, then a linear map to
+    # the latent code; the decoder mirrors them with 4 up-sampling + conv layers. vae_beta weights the KL term.
+    reward_conv_channels: list[int] = field(default_factory=lambda: [16, 32, 64, 64])
+    reward_latent_dim: int = 32
+    vae_beta: float = 5.0
+    # A learned reward counts as "positive" for the logged false-positive/negative rates when it is >= this;
+    # None = 0.9 for "ae" (cosine of the codes) and -1.0 for "vae" (latent distance within 1 prior std).
+    learned_reward_positive: float | None = None
     # Inputs normalised with the observation key's mean/std (observation and goal alike) are clipped.
     input_clip: float = 5.0
 
     # DDPG.
+    # n-step TD target (DrQ-v2 uses 3): sum_{i=1..n} gamma^(i-1) r_{t+i} + gamma^n Q'(o_{t+n}, g), with every
+    # r_{t+i} the same reward (indicator: o_{t+i} equals the goal) and n cut at the episode end. 1 = the paper's
+    # one-step target. From images a goal k steps ahead is worth its value only after k-1 bootstraps through
+    # learnt features; n > 1 carries the one exact match back n steps per update. Online trainer only: a
+    # lerobot-train sample holds o_t, o_{t+1} and the future frames, not the frames in between.
+    n_step: int = 1
     tau: float = 0.98  # target <- tau * target + (1 - tau) * online
     action_l2: float = 1.0  # baselines' HER penalty on the squared actor output
     learning_rate: float = 1e-3
@@ -190,6 +218,22 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             self.set_horizon(self.horizon)
         if self.reward not in REWARD_MODES:
             raise ValueError(f"reward must be one of {REWARD_MODES}, got {self.reward!r}")
+        if self.reward in LEARNED_REWARDS and self.filter:
+            raise ValueError(
+                f"filter=True drops R- transitions, but reward={self.reward!r} gives a continuous reward with no "
+                "R-: pass --policy.filter=false"
+            )
+        if self.filter_q not in FILTER_Q_SOURCES:
+            raise ValueError(f"filter_q must be one of {FILTER_Q_SOURCES}, got {self.filter_q!r}")
+        if self.filter_start not in FILTER_STARTS:
+            raise ValueError(f"filter_start must be one of {FILTER_STARTS}, got {self.filter_start!r}")
+        if not 0 < self.filter_calibration <= 1:
+            raise ValueError(f"filter_calibration must be in (0, 1], got {self.filter_calibration}")
+        if not self.reward_conv_channels or self.reward_latent_dim < 1:
+            raise ValueError(
+                f"reward_conv_channels must list at least one conv layer, got {self.reward_conv_channels}; "
+                f"reward_latent_dim must be >= 1, got {self.reward_latent_dim}"
+            )
         if not self.positive_reward > self.negative_reward:
             raise ValueError("positive_reward must be larger than negative_reward")
         if min(self.p_next, self.p_future) < 0 or self.p_next + self.p_future > 1:
@@ -206,6 +250,8 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(
                 f"future_offsets must be non-empty and all >= 2 (t' >= t+2), got {self.future_offsets}"
             )
+        if self.n_step < 1:
+            raise ValueError(f"n_step must be >= 1 (1 = the paper's one-step TD target), got {self.n_step}")
         if not 0 <= self.tau <= 1:
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")
         if self.image_encoder not in IMAGE_ENCODERS:
@@ -235,7 +281,14 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if horizon < 2:
             raise ValueError(f"horizon must be >= 2 (gamma = (T-1)/T), got {horizon}")
         self.horizon = int(horizon)
-        if self.q_init is not None and not self.q_min <= self.q_init < self.q0:
+        if self.q_init is None:
+            return
+        if self.reward in LEARNED_REWARDS and not self.q_min <= self.q_init <= self.q_max:
+            raise ValueError(
+                f"q_init must be in the {self.reward!r} reward's return range [{self.q_min}, {self.q_max}], "
+                f"got {self.q_init}"
+            )
+        if self.reward not in LEARNED_REWARDS and not self.q_min <= self.q_init < self.q0:
             raise ValueError(
                 f"q_init must be in [R-/(1-gamma), q0) = [{self.q_min}, {self.q0}), got {self.q_init}"
             )
@@ -251,8 +304,27 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         return (self.horizon - 1) / self.horizon
 
     @property
+    def reward_range(self) -> tuple[float, float]:
+        """(lowest, highest) reward: R-, R+ for the indicator and oracle; [0, 1] for the AE's clipped cosine,
+        (-inf, 0] for the VAE's negative latent distance."""
+        if self.reward == "ae":
+            return 0.0, 1.0
+        if self.reward == "vae":
+            return float("-inf"), 0.0
+        return self.negative_reward, self.positive_reward
+
+    @property
+    def reward_positive_threshold(self) -> float:
+        """Rewards >= this count as positive in the logged rates: R+, or ``learned_reward_positive``."""
+        if self.reward not in LEARNED_REWARDS:
+            return self.positive_reward
+        if self.learned_reward_positive is not None:
+            return self.learned_reward_positive
+        return 0.9 if self.reward == "ae" else -1.0
+
+    @property
     def q_min(self) -> float:
-        return self.negative_reward * self.discounted_steps
+        return self.reward_range[0] * self.discounted_steps
 
     @property
     def discounted_steps(self) -> float:
@@ -262,11 +334,14 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     @property
     def initial_q(self) -> float:
-        return self.q_min if self.q_init is None else self.q_init
+        """q_init, else the lowest return (0 for the VAE, whose return is unbounded below)."""
+        if self.q_init is not None:
+            return self.q_init
+        return self.q_min if self.q_min > float("-inf") else 0.0
 
     @property
     def q_max(self) -> float:
-        return self.positive_reward * self.discounted_steps
+        return self.reward_range[1] * self.discounted_steps
 
     @property
     def q0(self) -> float:

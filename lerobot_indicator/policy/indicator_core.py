@@ -13,6 +13,9 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 ``future.valid``                             bool (B,): False when no t' >= t+2 exists (o_{t'} ignored)
 ``future.count`` (optional)                  long (B,): how many t' the candidate was drawn from
 ``next.valid`` (optional)                    bool (B,): False drops the transition (no o_{t+1})
+``path.k`` (``n_step`` > 1)                  o_{t+2..t+n}, (B, n-1, ...); steps past o_T hold o_T
+``path.valid`` (``n_step`` > 1)              bool (B, n-1): t+i <= T for i = 2..n
+``path.observation.gt_achieved_goal`` (o)    ground truth of o_{t+2..t+n} (oracle reward)
 ``next.observation.gt_achieved_goal`` (opt)  ground truth of o_{t+1}   } oracle reward and the reward
 ``future.observation.gt_achieved_goal`` (o)  ground truth of o_{t'}    } accuracy / false-negative
 ``observation.gt_desired_goal`` (optional)   ground truth of the goal  } statistics
@@ -21,14 +24,15 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 from torch import Tensor, nn
 
 from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, tanh
+from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames
 
 # Transition-batch keys (the table above).
 ACTION = "action"
@@ -37,6 +41,9 @@ FUTURE = "future."
 HAS_FUTURE = FUTURE + "valid"
 FUTURE_COUNT = FUTURE + "count"
 NEXT_VALID = NEXT + "valid"
+PATH = "path."
+PATH_VALID = PATH + "valid"
+GT_PATH_ACHIEVED = PATH + OBS_GT_ACHIEVED_GOAL
 GT_NEXT_ACHIEVED = NEXT + OBS_GT_ACHIEVED_GOAL
 GT_FUTURE_ACHIEVED = FUTURE + OBS_GT_ACHIEVED_GOAL
 GT_DESIRED = OBS_GT_DESIRED_GOAL  # the recorded goal's ground truth: o_t's own key, no prefix
@@ -138,6 +145,20 @@ def filter_keep(reward: Tensor, q: Tensor, q0: float, r_neg: float) -> Tensor:
     return ~((reward == r_neg) & (q > q0))
 
 
+def filter_calibrated(
+    reward: Tensor, q: Tensor, valid: Tensor, q0: float, r_pos: float, fraction: float
+) -> Tensor:
+    """0-d bool: at least ``fraction`` of the batch's valid R+ transitions have Q > q0 (False without any).
+
+    R+ transitions are the relabeled positives (o_g = o_{t+1}, or a future frame equal to it), whose return
+    is high whatever the critic says; Q above q0 on them is the evidence that Q > q0 on an R- transition means
+    "probably reachable" rather than an uncalibrated critic.
+    """
+    positive = (reward == r_pos) & valid
+    above = (positive & (q > q0)).sum()
+    return (positive.sum() > 0) & (above >= fraction * positive.sum())
+
+
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * mask).sum() / mask.sum().clamp_min(1)
 
@@ -151,35 +172,39 @@ class Features:
     target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
     target_actor: Tensor
     transition: Tensor | None = None  # (o_t, o_{t+1}) with gradients, shared encoder only
+    target_critic_obs: Tensor | None = None  # (o_t, g) as the target critic sees it (filter_q="target")
 
 
 def encode_batch(
     obs: dict[str, Tensor],
     next_obs: dict[str, Tensor],
     goal: dict[str, Tensor],
-    source: Tensor,
+    goal_is_next: Tensor,
     actor: nn.Module,
     critic: Critic,
     target_actor: nn.Module,
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
+    transition_next: dict[str, Tensor] | None = None,
 ) -> Features:
     """Every network's features, each distinct frame encoded once per encoder.
 
-    A goal that *is* o_{t+1} (``source`` next, about half the batch with balancing) reuses o_{t+1}'s
+    ``next_obs`` is the frame the TD target bootstraps from (o_{t+1}; o_{t+n} for n-step targets). A goal that
+    *is* that frame (``goal_is_next``: about half the batch with balancing and one-step targets) reuses its
     encoding. With the shared ("drq") encoder one conv pass over o_t, o_{t+1} and the other goals serves all
     four networks: the targets use the online encoder's features of (o_{t+1}, g) without gradients (DrQ-v2),
     or their own EMA encoder (``target_encoder``). Under ``torch.compile`` (static shapes) and for state
-    inputs every goal is encoded, which gives the same values.
+    inputs every goal is encoded, which gives the same values. ``transition_next``: o_{t+1} for the
+    inverse-dynamics features (o_t, o_{t+1}) where ``next_obs`` is another frame, encoded in the same pass.
     """
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
-    everyone = torch.arange(source.shape[0], device=source.device)
-    rest = (source != SOURCE_NEXT).nonzero().squeeze(1) if dedupe else everyone
+    everyone = torch.arange(goal_is_next.shape[0], device=goal_is_next.device)
+    rest = (~goal_is_next).nonzero().squeeze(1) if dedupe else everyone
     goal_rest = {k: v[rest] for k, v in goal.items()} if dedupe else goal
     # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
     # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
     # few-pixel displacement an action makes into the shift noise.
-    shift = draw_shifts(source.shape[0], config.augment_pad, source.device) if config.image_keys else None
+    shift = draw_shifts(everyone.shape[0], config.augment_pad, everyone.device) if config.image_keys else None
 
     def shifts(*rows: Tensor) -> list[Tensor] | None:
         return None if shift is None else [shift[:, r] for r in rows]
@@ -191,28 +216,39 @@ def encode_batch(
         *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
         return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
 
+    target_obs = config.filter and config.filter_q == "target"
+
+    def target_critic_features() -> tuple[Tensor, Tensor | None]:
+        """The target critic's (o_{t+1}, g) and, for the filter, (o_t, g), from its own encoder."""
+        with torch.no_grad():
+            *h_obs, h_next, h_goal = encode_with_next(target_critic.encoder, [obs] if target_obs else [])
+        return torch.cat([h_next, h_goal], dim=1), torch.cat([h_obs[0], h_goal], 1) if target_obs else None
+
     if config.shared_encoder:
-        h_obs, h_next, h_goal = encode_with_next(critic.encoder, [obs])
+        extra = [] if transition_next is None else [transition_next]
+        h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra])
         features = torch.cat([h_obs, h_goal], dim=1)
         target = torch.cat([h_next, h_goal], dim=1).detach()
+        target_o = features.detach() if target_obs else None
         if config.target_encoder:
-            with torch.no_grad():
-                target = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
+            target, target_o = target_critic_features()
         return Features(
             critic=features,
             actor=features.detach(),
             target_critic=target,
             target_actor=target,
-            transition=torch.cat([h_obs, h_next], dim=1),
+            transition=torch.cat([h_obs, h_extra[0] if h_extra else h_next], dim=1),
+            target_critic_obs=target_o,
         )
+    target_c, target_o = target_critic_features()
     with torch.no_grad():
-        target_c = torch.cat(encode_with_next(target_critic.encoder, []), dim=1)
         target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
     return Features(
         critic=critic.encode(obs, goal, shift),
         actor=actor.encode(obs, goal, shift),
         target_critic=target_c,
         target_actor=target_a,
+        target_critic_obs=target_o,
     )
 
 
@@ -227,6 +263,32 @@ def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
             t.copy_(o)
 
 
+def n_step_return(
+    batch: dict[str, Tensor],
+    keys: list[str],
+    first_reward: Tensor,
+    step_reward: Callable[[dict[str, Tensor], Tensor | None], Tensor],
+    config: IndicatorDDPGConfig,
+) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
+    """sum_{i=1..n'} gamma^(i-1) r_{t+i}, gamma^n' and o_{t+n'}, with n' = min(n, T - t).
+
+    ``first_reward`` is r_{t+1}; r_{t+i} (i >= 2) is ``step_reward`` of the batch's ``path`` frame o_{t+i} (the
+    same goal, the same comparison). Steps past the episode end add nothing; the path's last entry holds
+    o_{min(t+n, T)}, the frame the target bootstraps from.
+    """
+    path_valid = batch[PATH_VALID].bool()
+    gt_path = batch.get(GT_PATH_ACHIEVED)
+    returns, scale = first_reward.clone(), torch.ones_like(first_reward)
+    for i in range(path_valid.shape[1]):
+        scale = scale * torch.where(path_valid[:, i], config.gamma, 1.0)
+        frames = {k: batch[PATH + k][:, i] for k in keys}
+        r = step_reward(frames, None if gt_path is None else gt_path[:, i])
+        returns = returns + torch.where(path_valid[:, i], scale * r, 0.0)
+    steps = 1 + path_valid.sum(dim=1)
+    discount = torch.pow(torch.full_like(first_reward, config.gamma), steps.to(first_reward.dtype))
+    return returns, discount, {k: batch[PATH + k][:, -1] for k in keys}
+
+
 def indicator_ddpg_loss(
     batch: dict[str, Tensor],
     actor: nn.Module,
@@ -235,8 +297,12 @@ def indicator_ddpg_loss(
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
     generator: torch.Generator | None = None,
+    reward_model: nn.Module | None = None,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """One DDPG step's loss on a transition batch (module docstring), with relabeling, rewards and filtering.
+
+    ``reward_model`` (``learned_reward.LearnedReward``, for ``reward`` "ae" / "vae") gives the reward from
+    (o_{t+1}, g) and adds its own reconstruction loss on the batch's o_t to the returned loss.
 
     Returns ``critic_loss + actor_loss``: the critic gets gradients only from the TD loss (targets and the
     filter's Q are computed without gradients) and the actor only from -Q(o, g, pi(o, g)) + action_l2 *
@@ -259,28 +325,61 @@ def indicator_ddpg_loss(
     goal = select_goals(batch, keys, relabel.source)
     gt_goal = ground_truth_goal(batch, relabel.source)
 
-    if config.reward == "indicator":
-        reward = indicator_reward(next_obs, goal, config.positive_reward, config.negative_reward)
-    else:
-        if gt_goal is None:
+    def step_reward(frames: dict[str, Tensor], gt_achieved: Tensor | None) -> Tensor:
+        """The reward of arriving at ``frames`` with the batch's goals: indicator, learned or oracle."""
+        if config.reward == "indicator":
+            return indicator_reward(frames, goal, config.positive_reward, config.negative_reward)
+        if reward_model is not None:
+            return reward_model.reward(frames, goal)
+        if config.reward != "oracle":
+            raise ValueError(f"reward={config.reward!r} needs the policy's reward_model")
+        if gt_goal is None or gt_achieved is None:
             raise ValueError(
                 f"reward='oracle' needs ground truth in the batch: {GT_NEXT_ACHIEVED}, {GT_FUTURE_ACHIEVED}, "
-                f"{GT_DESIRED}"
+                f"{GT_DESIRED}" + (f", {GT_PATH_ACHIEVED}" if config.n_step > 1 else "")
             )
-        success = ground_truth_success(batch[GT_NEXT_ACHIEVED], gt_goal, config.oracle_epsilon)
-        reward = torch.where(success, config.positive_reward, config.negative_reward)
+        success = ground_truth_success(gt_achieved, gt_goal, config.oracle_epsilon)
+        return torch.where(success, config.positive_reward, config.negative_reward)
 
-    f = encode_batch(obs, next_obs, goal, relabel.source, actor, critic, target_actor, target_critic, config)
+    reward = step_reward(next_obs, batch.get(GT_NEXT_ACHIEVED))  # r_{t+1}: the filter's and the stats'
+    returns, discount, bootstrap_obs = reward, torch.full_like(reward, config.gamma), next_obs
+    if config.n_step > 1:
+        returns, discount, bootstrap_obs = n_step_return(batch, keys, reward, step_reward, config)
+    # Where the goal is the frame the target bootstraps from, its encoding is shared (encode_batch).
+    goal_is_next = relabel.source == SOURCE_NEXT
+    if config.n_step > 1:
+        goal_is_next = goal_is_next & ~batch[PATH_VALID].any(dim=1)
+    # The inverse-dynamics features pair o_t with o_{t+1}, which an n-step target does not bootstrap from.
+    transition_next = next_obs if config.n_step > 1 and critic.inverse is not None else None
+    f = encode_batch(
+        obs,
+        bootstrap_obs,
+        goal,
+        goal_is_next,
+        actor,
+        critic,
+        target_actor,
+        target_critic,
+        config,
+        transition_next,
+    )
     q = critic.head(f.critic, action)
     with torch.no_grad():
         next_q = target_critic.head(f.target_critic, target_actor.head(f.target_actor))
         # No terminal masking: episodes end by time limit only (as in HER). Clip to the return's range.
-        target = (reward + config.gamma * next_q).clamp(config.q_min, config.q_max)
-        keep = (
-            valid & filter_keep(reward, q.detach(), config.q0, config.negative_reward)
-            if config.filter
-            else valid
-        )
+        target = (returns + discount * next_q).clamp(config.q_min, config.q_max)
+        keep, filter_on = valid, None
+        if config.filter:
+            q_filter = (
+                q.detach() if f.target_critic_obs is None else target_critic.head(f.target_critic_obs, action)
+            )
+            drop = ~filter_keep(reward, q_filter, config.q0, config.negative_reward)
+            if config.filter_start == "calibrated":
+                filter_on = filter_calibrated(
+                    reward, q_filter, valid, config.q0, config.positive_reward, config.filter_calibration
+                )
+                drop = drop & filter_on
+            keep = valid & ~drop
     keep_f = keep.to(q.dtype)
     critic_loss = masked_mean((q - target) ** 2, keep_f)
 
@@ -292,10 +391,10 @@ def indicator_ddpg_loss(
     loss = critic_loss + actor_loss
     inverse_loss = None
     if critic.inverse is not None and f.transition is not None:
-        predicted = tanh(critic.inverse(f.transition))
+        predicted = torch.tanh(critic.inverse(f.transition))
         inverse_loss = masked_mean(((predicted - action) ** 2).mean(dim=1), valid_f)
         loss = loss + config.inverse_dynamics * inverse_loss
-    positive = (reward == config.positive_reward).float()
+    positive = (reward >= config.reward_positive_threshold).float()
     stats = {
         "critic_loss": critic_loss.detach(),
         "actor_loss": actor_loss.detach(),
@@ -309,6 +408,12 @@ def indicator_ddpg_loss(
     }
     if inverse_loss is not None:
         stats["inverse_dynamics_loss"] = inverse_loss.detach()
+    if filter_on is not None:
+        stats["filter_active"] = filter_on.float()
+    if reward_model is not None:
+        model_loss, model_stats = reward_model.loss(obs)
+        loss = loss + model_loss
+        stats |= model_stats | {"reward_mean": masked_mean(reward, valid_f)}
     if gt_goal is not None:
         stats |= reward_statistics(reward, batch[GT_NEXT_ACHIEVED], gt_goal, keep, valid, config)
     return loss, stats
@@ -331,11 +436,21 @@ def reward_statistics(
     """
     gt_pos = ground_truth_success(gt_next, gt_goal, config.oracle_epsilon) & valid
     gt_neg = ~gt_pos & valid
-    pos = (reward == config.positive_reward) & valid
+    pos = (reward >= config.reward_positive_threshold) & valid
     neg = ~pos & valid
     kept_gt_pos = gt_pos & keep
     filtered = valid & ~keep
-    return {
+    ranking = {}
+    if config.reward in LEARNED_REWARDS:
+        # P(r(ground-truth positive) > r(ground-truth negative)) over the batch's pairs, ties half: how well
+        # the learned reward ranks, independent of the threshold (0.5 = no better than chance or no pairs).
+        pairs = gt_pos[:, None] & gt_neg[None, :]
+        order = (reward[:, None] > reward[None, :]).float() + 0.5 * (
+            reward[:, None] == reward[None, :]
+        ).float()
+        n_pairs = pairs.sum()
+        ranking["reward_auc"] = torch.where(n_pairs > 0, (order * pairs).sum() / n_pairs.clamp_min(1), 0.5)
+    return ranking | {
         "reward_accuracy": masked_mean((pos == gt_pos).float(), valid.float()),
         "false_negative_rate": (neg & gt_pos).sum() / gt_pos.sum().clamp_min(1),
         "false_positive_rate": (pos & gt_neg).sum() / gt_neg.sum().clamp_min(1),
@@ -354,6 +469,12 @@ def dataset_batch_to_transitions(
     (B, 2 + n_offsets, ...) with ``<key>_is_pad`` (B, 2 + n_offsets) marking frames past the episode end.
     Index 0 is o_t, 1 is o_{t+1}; the future frame is one *valid* offset picked uniformly per sample.
     """
+    if config.n_step > 1:
+        raise ValueError(
+            f"n_step={config.n_step}: a lerobot-train sample holds o_t, o_{{t+1}} and future frames, not the "
+            "frames in between that an n-step target compares with the goal; train with n_step=1 here, or "
+            "with lerobot-indicator-train (--dataset.* seeds its episode buffer)"
+        )
     first = config.observation_keys[0]
     pad_key = f"{first}_is_pad"
     n_frames = 2 + len(config.future_offsets)

@@ -15,7 +15,8 @@ from torch import Tensor, nn
 from lerobot_indicator.finite import check_batch, check_loss
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
+from lerobot_indicator.policy.learned_reward import LearnedReward
 from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
 
 
@@ -48,6 +49,8 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         self.target_actor, self.target_critic = copy.deepcopy((self.actor, self.critic))
         self.target_actor.requires_grad_(False)
         self.target_critic.requires_grad_(False)
+        # The AE / VAE baselines' reward network, trained by its own loss in the same backward and step.
+        self.reward_model = LearnedReward(config, dataset_stats) if config.reward in LEARNED_REWARDS else None
         self._loss = indicator_core.indicator_ddpg_loss
         if config.compile_model:
             # Static shapes: a second batch size (a last short batch, another policy in the same process)
@@ -58,10 +61,15 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         """Input normalisation of every network (online and target) from ``{key: {"mean", "std"}}``."""
         for net in (self.actor, self.critic, self.target_actor, self.target_critic):
             net.encoder.set_stats(stats)
+        if self.reward_model is not None:
+            self.reward_model.set_stats(stats)
 
     def get_optim_params(self) -> list[dict]:
         # Target networks are moved by update(), never by the optimizer; a shared encoder is listed once.
-        return [{"params": list(nn.ModuleList([self.actor, self.critic]).parameters())}]
+        # The reward model's parameters are disjoint from the agent's, so one Adam step over both (lerobot-train
+        # builds one optimizer) is its own separate step at the same learning rate.
+        trained = [self.actor, self.critic] + ([self.reward_model] if self.reward_model is not None else [])
+        return [{"params": list(nn.ModuleList(trained).parameters())}]
 
     def reset(self) -> None:
         pass
@@ -83,7 +91,14 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         if not indicator_core.is_transition_batch(batch, self.config):
             batch = indicator_core.dataset_batch_to_transitions(batch, self.config, generator)
         loss, stats = self._loss(
-            batch, self.actor, self.critic, self.target_actor, self.target_critic, self.config, generator
+            batch,
+            self.actor,
+            self.critic,
+            self.target_actor,
+            self.target_critic,
+            self.config,
+            generator,
+            self.reward_model,
         )
         check_loss(loss, stats)  # before any backward or optimizer step can spread it into the weights
         return loss, indicator_core.stats_to_floats(stats)

@@ -16,82 +16,10 @@ from torch import Tensor, nn
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
 
-class _SigmoidTanh(torch.autograd.Function):
-    @staticmethod
-    def forward(ctx, x: Tensor) -> Tensor:
-        y = torch.sigmoid(x * 2).mul_(2).sub_(1)
-        ctx.save_for_backward(y)
-        return y
-
-    @staticmethod
-    def backward(ctx, grad: Tensor) -> Tensor:
-        (y,) = ctx.saved_tensors
-        return torch.ops.aten.tanh_backward(grad, y)
-
-
-# Eigen's float tanh: odd numerator and even denominator coefficients (in x^2), lowest order first.
-_TANH_NUM = (
-    4.89352455891786e-03,
-    6.37261928875436e-04,
-    1.48572235717979e-05,
-    5.12229709037114e-08,
-    -8.60467152213735e-11,
-    2.00018790482477e-13,
-    -2.76076847742355e-16,
-)
-_TANH_DEN = (4.89352518554385e-03, 2.26843463243900e-03, 1.18534705686654e-04, 1.19825839466702e-06)
-
-
-class _RationalTanh(torch.autograd.Function):
-    """tanh(x) ~= x p(x^2) / q(x^2) on [-7.9, 7.9] (constant +-1 to float precision beyond), Eigen's coefficients."""
-
-    @staticmethod
-    def forward(ctx, x: Tensor) -> Tensor:
-        x = x.clamp(-7.90531110763549805, 7.90531110763549805)
-        x2 = x * x
-        p = x2 * _TANH_NUM[6] + _TANH_NUM[5]
-        for a in _TANH_NUM[4::-1]:
-            p = p * x2 + a
-        q = x2 * _TANH_DEN[3] + _TANH_DEN[2]
-        for b in _TANH_DEN[1::-1]:
-            q = q * x2 + b
-        y = x * p / q
-        ctx.save_for_backward(y)
-        return y
-
-    @staticmethod
-    def backward(ctx, grad: Tensor) -> Tensor:
-        (y,) = ctx.saved_tensors
-        return grad * (1 - y * y)
-
-
-def tanh(x: Tensor) -> Tensor:
-    """tanh; on CPU computed by the fastest float32-accurate formula for the executor.
-
-    ATen's CPU tanh kernel is slow enough to be a large share of a state-based update (the 3x256 tanh MLPs call
-    it 17 times). Eager: 2 sigmoid(2x) - 1 (max abs error 2e-7) with torch's ``tanh_backward``. Under
-    ``torch.compile`` (``compile_model``), where Inductor's own tanh is as slow as ATen's: Eigen's / XLA's
-    clamped rational approximation (13/6 odd/even polynomials, max abs error 4e-7), which Inductor fuses into
-    one kernel (in eager it would be ~15 separate ops). The compiled branch is out of place: compile mis-traces
-    in-place ops here (zero gradients below the last layer). On CUDA torch.tanh is fast and used as is.
-    Timings: docs/results/README.md, "vs Stable-Baselines3".
-    """
-    if x.device.type != "cpu":
-        return torch.tanh(x)
-    if torch.compiler.is_compiling():
-        return _RationalTanh.apply(x)
-    return _SigmoidTanh.apply(x)
-
-
-class Tanh(nn.Module):
-    def forward(self, x: Tensor) -> Tensor:
-        return tanh(x)
-
-
 def mlp(in_dim: int, hidden_dims: list[int], out_dim: int) -> nn.Sequential:
     layers: list[nn.Module] = []
     for h in hidden_dims:
-        layers += [nn.Linear(in_dim, h), Tanh()]
+        layers += [nn.Linear(in_dim, h), nn.Tanh()]
         in_dim = h
     layers.append(nn.Linear(in_dim, out_dim))
     return nn.Sequential(*layers)
@@ -133,7 +61,7 @@ class ObservationEncoder(nn.Module):
             for ch, stride in zip(config.conv_channels, config.conv_strides, strict=True):
                 layers += [
                     nn.Conv2d(in_ch, ch, config.conv_kernel_size, stride),
-                    nn.ReLU() if drq else Tanh(),
+                    nn.ReLU() if drq else nn.Tanh(),
                 ]
                 in_ch = ch
             size = min(height, width)
@@ -349,7 +277,7 @@ class Actor(GoalConditioned):
         self.net = mlp(2 * self.encoder.out_dim, config.hidden_dims, config.action_dim)
 
     def head(self, features: Tensor) -> Tensor:
-        return tanh(self.net(features))
+        return torch.tanh(self.net(features))
 
     def forward(self, obs: dict[str, Tensor], goal: dict[str, Tensor]) -> Tensor:
         return self.head(self.encode(obs, goal))

@@ -175,7 +175,16 @@ class EpisodeReplayBuffer:
         self.num_episodes = min(self.num_episodes + 1, self.capacity)
         self.total_episodes_added += 1
 
-    def sample(self, batch_size: int, rng: np.random.Generator, packed: bool = False) -> dict:
+    def start_at(self, total_episodes: int) -> None:
+        """Continue as if ``total_episodes`` had been added (the FIFO evicted them), so the next added episode
+        lands in the slot it had in the run that added them: how a resumed run rebuilds an evicted buffer."""
+        self.total_episodes_added = total_episodes
+        self.next_slot = total_episodes % self.capacity
+        self.num_episodes = min(total_episodes, self.capacity)
+
+    def sample(
+        self, batch_size: int, rng: np.random.Generator, packed: bool = False, n_step: int = 1
+    ) -> dict:
         """Sample transitions uniformly, each with one future observation of its own episode.
 
         The future index is uniform in ``{t+2, ..., T}`` (paper Algorithm 1). For ``t = T - 1`` that
@@ -185,6 +194,9 @@ class EpisodeReplayBuffer:
         ``gt_next_achieved``, ``gt_future_achieved`` and ``gt_desired``. ``packed``: observations stay in
         their stored dtype (uint8 = k/255, uint16 = its value; 4x / 2x smaller than float32), so they move to
         the device as they are and the networks convert them there (``networks_indicator_ddpg.as_float``).
+        ``n_step`` > 1 adds ``path_obs`` o_{t+2..t+n} (B, n-1, ...; steps past T hold o_T), ``path_valid``
+        (t+i <= T) and, with ground truth, ``gt_path_achieved``: what an n-step TD target compares and
+        bootstraps from.
         """
         if self.num_episodes == 0:
             raise RuntimeError("cannot sample from an empty replay buffer")
@@ -208,6 +220,13 @@ class EpisodeReplayBuffer:
             "t": t,
             "future_t": future,
         }
+        if n_step > 1:
+            steps = t[:, None] + np.arange(2, n_step + 1)
+            path = np.minimum(steps, T)
+            batch["path_obs"] = {k: get(k, ep[:, None], path) for k in self.obs}
+            batch["path_valid"] = steps <= T
+            if self.gt_achieved is not None:
+                batch["gt_path_achieved"] = self.gt_achieved[ep[:, None], path]
         if self.gt_achieved is not None:
             batch["gt_next_achieved"] = self.gt_achieved[ep, t + 1]
             batch["gt_future_achieved"] = self.gt_achieved[ep, future]

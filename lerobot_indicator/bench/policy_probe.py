@@ -1,0 +1,88 @@
+"""Where a trained goal-conditioned policy stops short, and whether its critic or its actor is to blame.
+
+Runs the policy greedily on evaluation goals (``keys.EVAL_SEED_OFFSET`` seeds, the trainer's) and reports,
+per axis of the end effector: the final error (signed mean, absolute mean, and its correlation with the goal
+coordinate: a policy that ignores the goal's value regresses to the mean, correlation near -1), and, at every
+step of the episode's second half that is more than ``epsilon`` from the goal on that axis, which way the
+actor moves and which way the critic's best action on a {-1, 0, 1}^A grid moves: toward the goal, away, or
+not at all. Ground truth is used to *measure* only.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import torch
+from lerobot.envs import make_env
+from lerobot.envs.configs import EnvConfig
+from lerobot.envs.factory import make_env_pre_post_processors
+
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, goal_key
+from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
+from lerobot_indicator.training.rollout import env_batch
+
+
+def stuck_state_probe(
+    policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int = 20, epsilon: float = 0.05
+) -> dict:
+    policy.eval()
+    keys = policy.config.observation_keys
+    vec_env = make_env(env_cfg, n_envs=1)[env_cfg.type][0]
+    env_pre, _ = make_env_pre_post_processors(env_cfg, policy.config)
+    action_dim = policy.config.action_dim
+    grid = torch.tensor(list(itertools.product([-1.0, 0.0, 1.0], repeat=action_dim)))
+    counts = {
+        name: np.zeros(action_dim) for name in ("states", "actor_toward", "critic_toward", "critic_zero")
+    }
+    counts["critic_away"] = np.zeros(action_dim)
+    final_error, goals = [], []
+    try:
+        for episode in range(episodes):
+            obs, info = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
+            horizon = int(vec_env.call("_max_episode_steps")[0])
+            for t in range(horizon):
+                batch = env_batch(obs, vec_env, env_pre)
+                o = {k: batch[k] for k in keys}
+                g = {k: batch[goal_key(k)] for k in keys}
+                with torch.no_grad():
+                    action = policy.actor(o, g)[0]
+                    n = len(grid)
+                    q = policy.critic(
+                        {k: v.expand(n, *v.shape[1:]) for k, v in o.items()},
+                        {k: v.expand(n, *v.shape[1:]) for k, v in g.items()},
+                        grid,
+                    )
+                error = info[GT_DESIRED_GOAL][0] - info[GT_ACHIEVED_GOAL][0]
+                if t >= horizon // 2:
+                    best = grid[q.argmax()].numpy()
+                    far = np.abs(error) > epsilon
+                    sign = np.sign(error)
+                    counts["states"] += far
+                    counts["actor_toward"] += far & (np.sign(action.numpy()) == sign)
+                    counts["critic_toward"] += far & (np.sign(best) == sign)
+                    counts["critic_away"] += far & (np.sign(best) == -sign)
+                    counts["critic_zero"] += far & (best == 0)
+                obs, _, _, _, info = vec_env.step(action.numpy()[None])
+            final_error.append(info[GT_ACHIEVED_GOAL][0] - info[GT_DESIRED_GOAL][0])
+            goals.append(info[GT_DESIRED_GOAL][0])
+    finally:
+        vec_env.close()
+    final_error, goals = np.array(final_error, dtype=np.float64), np.array(goals, dtype=np.float64)
+    states = np.maximum(counts["states"], 1)
+    distance = np.linalg.norm(final_error, axis=1)
+    return {
+        "episodes": episodes,
+        "success_rate": float((distance <= epsilon).mean()),
+        "final_distance_mean_m": float(distance.mean()),
+        "final_error_signed_mean_m": final_error.mean(0).tolist(),
+        "final_error_abs_mean_m": np.abs(final_error).mean(0).tolist(),
+        "corr_final_error_vs_goal": [
+            float(np.corrcoef(final_error[:, i], goals[:, i])[0, 1]) for i in range(3)
+        ],
+        "far_states_second_half": counts["states"].tolist(),
+        "actor_moves_toward_goal": (counts["actor_toward"] / states).tolist(),
+        "critic_best_moves_toward_goal": (counts["critic_toward"] / states).tolist(),
+        "critic_best_moves_away": (counts["critic_away"] / states).tolist(),
+        "critic_best_stays": (counts["critic_zero"] / states).tolist(),
+    }

@@ -1,0 +1,53 @@
+"""Benchmark and diagnostics records: what they say about the machine, and writing them."""
+
+import json
+import os
+import platform
+from pathlib import Path
+
+import torch
+
+# CPU features that change which kernels torch's CPU ops use.
+MATMUL_FLAGS = ("avx2", "avx512f", "avx512_bf16", "amx_bf16", "amx_tile")
+
+
+def cpu_model() -> str:
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine()
+
+
+def cpu_flags() -> set[str]:
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("flags"):
+                return set(line.split(":", 1)[1].split())
+    return set()
+
+
+def machine_record() -> dict[str, object]:
+    """CPU model, the matmul-relevant flags it has, torch's CPU capability, versions and load."""
+    flags = cpu_flags()
+    return {
+        "cpu": cpu_model(),
+        "cpu_count": os.cpu_count(),
+        "cpu_flags": {f: f in flags for f in MATMUL_FLAGS},
+        "torch_cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+        "torch_threads": torch.get_num_threads(),
+        "load_average_1_5_15_min": os.getloadavg(),
+    }
+
+
+def write_json(path: Path | None, record: dict) -> None:
+    """Write ``record`` as indented JSON to ``path`` (parents created); nothing when ``path`` is None."""
+    if path is None:
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=2) + "\n")

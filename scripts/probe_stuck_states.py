@@ -1,0 +1,54 @@
+"""Where trained policies stop short on evaluation goals, per axis, and whether the critic's best action points
+toward the goal there (``lerobot_indicator.bench.policy_probe``).
+
+    python scripts/probe_stuck_states.py --env.type=sawyer_reach --env.obs_type=rgbd --env.camera.height=64 \
+        --env.camera.width=64 --runs_dir=outputs/rgbd_reach/runs/reach_rgbd \
+        --out=docs/results/experiments_rgbd/stuck_states.json
+"""
+
+import json
+import shlex
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import draccus
+import torch
+from lerobot.envs.configs import EnvConfig
+
+from lerobot_indicator.bench.policy_probe import stuck_state_probe
+from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
+
+
+@dataclass
+class ProbeConfig:
+    env: EnvConfig
+    # Every <method>/seed_<n> below it with a final checkpoint is probed.
+    runs_dir: Path
+    out: Path
+    episodes: int = 20
+
+
+@draccus.wrap()
+def main(cfg: ProbeConfig) -> None:
+    torch.set_num_threads(1)
+    results = {}
+    for run in sorted(cfg.runs_dir.glob("*/seed_*")):
+        path = run / "checkpoints" / "last" / "pretrained_model"
+        if not path.exists():
+            print(f"{run}: no checkpoints/last yet, skipped", flush=True)
+            continue
+        policy = IndicatorDDPGPolicy.from_pretrained(str(path)).to("cpu")
+        results[str(run)] = r = stuck_state_probe(policy, cfg.env, cfg.episodes)
+        print(
+            f"{run}: final error per axis {[round(e, 3) for e in r['final_error_abs_mean_m']]} m, critic's best "
+            f"action stays {[round(x, 2) for x in r['critic_best_stays']]}",
+            flush=True,
+        )
+    cfg.out.write_text(
+        json.dumps({"command": shlex.join(["python", *sys.argv]), "runs": results}, indent=2) + "\n"
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -20,7 +20,14 @@ import numpy as np
 import torch
 from PIL import Image, ImageDraw
 
-from lerobot_indicator.bench.framing import Framing, compare_framings, load_or_collect, top_down_camera
+from lerobot_indicator.bench.framing import (
+    RGB,
+    Framing,
+    framing_statistics,
+    load_or_collect,
+    probe_framings,
+    top_down_camera,
+)
 
 
 def main() -> None:
@@ -37,7 +44,7 @@ def main() -> None:
     parser.add_argument(
         "--margin", type=float, default=0.02, help="metres around the links for the tight view"
     )
-    parser.add_argument("--updates", type=int, default=400)
+    parser.add_argument("--updates", type=int, default=400, help="probe updates per framing; 0: no probe")
     parser.add_argument("--batch_size", type=int, default=32)
     parser.add_argument("--every", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
@@ -70,21 +77,31 @@ def main() -> None:
         args.out.write_text(json.dumps({**header, "framings": results}, indent=2) + "\n")
         print(f"wrote {args.out}: {json.dumps(results)}", flush=True)
 
-    result = compare_framings(
-        framings, states, args.size, args.updates, args.batch_size, args.every, args.seed, on_update=write
-    )
-    examples = result.pop("example_frames")
+    results, rendered = framing_statistics(framings, states, args.size, on_update=write)
     if args.png is not None:
-        scale, pad, caption = 3, 6, 18
-        px = args.size * scale
-        canvas = Image.new("RGB", (len(examples) * (px + pad) + pad, px + caption + 2 * pad), "white")
-        draw = ImageDraw.Draw(canvas)
-        for i, (name, img) in enumerate(examples.items()):
-            x = pad + i * (px + pad)
-            canvas.paste(Image.fromarray(np.ascontiguousarray(img)).resize((px, px), Image.NEAREST), (x, pad))
-            draw.text((x, px + pad + 3), f"{name} ({args.size} px)", fill="black")
-        canvas.save(args.png)
-        print(f"wrote {args.png}")
+        save_examples({name: frames[RGB][0].transpose(1, 2, 0) for name, frames in rendered.items()}, args)
+    if args.updates > 0:
+        probe = {
+            "updates": args.updates,
+            "batch_size": args.batch_size,
+            "every": args.every,
+            "seed": args.seed,
+        }
+        probe_framings(results, rendered, states, probe, on_update=write)
+
+
+def save_examples(examples: dict[str, np.ndarray], args: argparse.Namespace) -> None:
+    """One state's RGB frame under every framing, side by side, enlarged 3x without smoothing."""
+    scale, pad, caption = 3, 6, 18
+    px = args.size * scale
+    canvas = Image.new("RGB", (len(examples) * (px + pad) + pad, px + caption + 2 * pad), "white")
+    draw = ImageDraw.Draw(canvas)
+    for i, (name, img) in enumerate(examples.items()):
+        x = pad + i * (px + pad)
+        canvas.paste(Image.fromarray(np.ascontiguousarray(img)).resize((px, px), Image.NEAREST), (x, pad))
+        draw.text((x, px + pad + 3), f"{name} ({args.size} px)", fill="black")
+    canvas.save(args.png)
+    print(f"wrote {args.png}")
 
 
 if __name__ == "__main__":

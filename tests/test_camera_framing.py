@@ -102,3 +102,44 @@ def test_image_statistics_on_hand_made_frames():
     assert stats["pushes"] == 2 and stats["pushes_that_moved_the_rope"] == 1
     assert stats["frac_moving_pushes_that_change_the_image"] == 1.0
     assert stats["changed_rgb_pixels_per_moving_push_mean"] == 2.0  # pixel 0 and pixel 2 of row 0
+
+
+def test_framing_statistics_and_probe_run_on_collected_states():
+    states = framing.collect_states(episodes=2, pushes=1, seed=0)
+    assert states.states.shape[0] == 4 and states.link_xy.shape == (4, 15, 2)
+    assert states.episode.tolist() == [0, 0, 1, 1]
+    framings = [framing.Framing("default"), framing.Framing("ss2", {"supersample": 2})]
+    results, rendered = framing.framing_statistics(framings, states, size=24)
+    assert rendered["ss2"][framing.RGB].shape == (4, 3, 24, 24) and rendered["ss2"][framing.DEPTH].shape == (
+        4,
+        1,
+        24,
+        24,
+    )
+    assert results["ss2"]["pushes"] == 2 and results["ss2"]["camera"]["supersample"] == 2
+    probe = {"updates": 2, "batch_size": 2, "every": 1, "seed": 0}
+    framing.probe_framings(results, rendered, states, probe)
+    for name in ("default", "ss2"):
+        p = results[name]["probe"]
+        assert (p["train_frames"], p["test_frames"]) == (
+            2,
+            2,
+        )  # one episode each: test frames are unseen episodes
+        assert [c["updates"] for c in p["curve"]] == [1, 2] and math.isfinite(p["final_test_error_m"])
+
+
+def test_supersampled_rope_task_preset_keeps_the_observation_size():
+    import draccus
+
+    from lerobot_indicator.presets import TASKS
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    args = [
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        *TASKS["rope_rgbd_supersample4"].env_args,
+    ]
+    cfg = draccus.parse(OnlineTrainConfig, args=args)
+    assert cfg.env.camera.supersample == 4
+    assert (cfg.env.camera.height, cfg.env.camera.width) == (100, 100)
+    assert cfg.env.gym_kwargs["camera"].supersample == 4  # what the env is built with

@@ -119,7 +119,6 @@ def render_states(framing: Framing, states: RopeStates, size: int) -> dict[str, 
     env = RopePushEnv(obs_type="rgbd", camera={**framing.camera, "width": size, "height": size})
     rgb, depth = [], []
     try:
-        env.reset(seed=0)
         for state in states.states:
             env.restore_state(state)
             obs = env.camera_observation()
@@ -216,22 +215,12 @@ def link_probe(
     }
 
 
-def compare_framings(
-    framings: list[Framing],
-    states: RopeStates,
-    size: int,
-    updates: int,
-    batch_size: int,
-    every: int,
-    seed: int,
-    on_update: Callable[[dict], None] | None = None,
-) -> dict:
-    """Image statistics of every framing on the same states, then the link probe of each.
-
-    ``on_update`` gets the results so far after each framing's statistics and each probe (so a slow machine
-    keeps what it measured). The frames of state 0 of each framing are returned under ``"example_frames"``.
-    """
-    results, examples, rendered = {}, {}, {}
+def framing_statistics(
+    framings: list[Framing], states: RopeStates, size: int, on_update: Callable[[dict], None] | None = None
+) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    """Image statistics of every framing on the same states, and the rendered frames (for ``probe_framings``).
+    ``on_update`` gets the results so far after each framing (a slow machine keeps what it measured)."""
+    results, rendered = {}, {}
     for framing in framings:
         t0 = time.perf_counter()
         frames = render_states(framing, states, size)
@@ -241,11 +230,21 @@ def compare_framings(
             **image_statistics(frames, states, framing.camera),
         }
         rendered[framing.name] = frames
-        examples[framing.name] = frames[RGB][0].transpose(1, 2, 0)
         if on_update is not None:
             on_update(results)
+    return results, rendered
+
+
+def probe_framings(
+    results: dict,
+    rendered: dict[str, dict[str, np.ndarray]],
+    states: RopeStates,
+    probe: dict,
+    on_update: Callable[[dict], None] | None = None,
+) -> dict:
+    """Adds ``link_probe(frames, states, **probe)`` of every framing to ``results`` (same seed and split)."""
     for name, frames in rendered.items():
-        results[name]["probe"] = link_probe(frames, states, updates, batch_size, every, seed)
+        results[name]["probe"] = link_probe(frames, states, **probe)
         if on_update is not None:
             on_update(results)
-    return {"framings": results, "example_frames": examples}
+    return results

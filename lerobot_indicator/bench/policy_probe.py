@@ -36,10 +36,11 @@ def stuck_state_probe(
         name: np.zeros(action_dim) for name in ("states", "actor_toward", "critic_toward", "critic_zero")
     }
     counts["critic_away"] = np.zeros(action_dim)
-    final_error, goals = [], []
+    final_error, goals, start_distance = [], [], []
     try:
         for episode in range(episodes):
             obs, info = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
+            start_distance.append(float(np.linalg.norm(info[GT_DESIRED_GOAL][0] - info[GT_ACHIEVED_GOAL][0])))
             horizon = int(vec_env.call("_max_episode_steps")[0])
             for t in range(horizon):
                 batch = env_batch(obs, vec_env, env_pre)
@@ -64,6 +65,8 @@ def stuck_state_probe(
                     counts["critic_away"] += far & (np.sign(best) == -sign)
                     counts["critic_zero"] += far & (best == 0)
                 obs, _, _, _, info = vec_env.step(action.numpy()[None])
+            # Gymnasium's same-step autoreset: the last step's info is final_info, the top level is the next reset's.
+            info = info.get("final_info", info)
             final_error.append(info[GT_ACHIEVED_GOAL][0] - info[GT_DESIRED_GOAL][0])
             goals.append(info[GT_DESIRED_GOAL][0])
     finally:
@@ -75,6 +78,7 @@ def stuck_state_probe(
         "episodes": episodes,
         "success_rate": float((distance <= epsilon).mean()),
         "final_distance_mean_m": float(distance.mean()),
+        "start_distance_mean_m": float(np.mean(start_distance)),
         "final_error_signed_mean_m": final_error.mean(0).tolist(),
         "final_error_abs_mean_m": np.abs(final_error).mean(0).tolist(),
         "corr_final_error_vs_goal": [

@@ -42,10 +42,10 @@ class OnlineConfig:
     # after the first cycle (a few episodes' narrow stats clip goals outside their range, so the networks
     # cannot tell those goals apart: docs/results/README.md). A --policy.path policy keeps its own stats.
     input_stats: str = "running"
-    # Where episodes are collected (training and evaluation): "local" = this process's vector env; "ray" = num_workers Ray
+    # Where training episodes are collected: "local" = this process's vector env; "ray" = num_workers Ray
     # actors, each with its own n_envs sub-envs and a CPU copy of the actor (docs/scaling.md; needs the
     # [distributed] extra). ray_address: an existing cluster ("auto", "host:6379", "ray://host:10001");
-    # None = a new local Ray instance on this machine.
+    # None = a new local Ray instance on this machine. Evaluation episodes run on the learner.
     backend: str = "local"
     num_workers: int = 2
     ray_address: str | None = None

@@ -142,45 +142,41 @@ class OnlineTrainer:
         random_eps: float | None = None,
     ) -> list[Rollouts]:
         """One episode per reset seed with the current policy, ``n_envs`` at a time (``explore``: the behaviour
-        policy, else the deterministic actor): every episode the trainer runs comes from here, on this
-        process's vector env or on the Ray workers (``--online.backend``).
-
-        Exploration noise: from ``generator`` if given (local backend only), else from a generator per batch
-        of ``n_envs`` episodes seeded from the batch's first reset seed, so an episode depends on its seed
-        alone and the Ray backend collects the same episodes as the local one."""
+        policy, else the deterministic actor): every episode the trainer runs comes from here."""
         n = self.cfg.online.n_envs
         if len(seeds) % n:
             raise ValueError(f"collect_episodes: {len(seeds)} seeds is not a multiple of n_envs={n}")
+        keep_frames = explore and self.persistence.keeps_dataset_frames
+        return [
+            run_episodes(
+                self.vec_env, self.policy, self.processors, stored_keys(self.keys), self.horizon,
+                seeds=list(seeds[i : i + n]), explore=explore, generator=generator, random_eps=random_eps,
+                keep_dataset_frames=keep_frames,
+            )
+            for i in range(0, len(seeds), n)
+        ]  # fmt: skip
+
+    def collect(self, cycle: int) -> list[Rollouts]:
+        """The cycle's behaviour-policy episodes, from seeds of (seed, cycle), so a resumed run replays them;
+        each batch of ``n_envs`` explores with a generator of its own (``EpisodeBatch``), so the Ray backend
+        (``--online.backend=ray``) collects the same episodes as the local one."""
+        t0 = time.perf_counter()
+        warmup = self.progress.episodes < self.cfg.online.warmup_episodes
+        seeds, n = cycle_episode_seeds(self.cfg.seed, cycle, self.episodes_per_cycle), self.cfg.online.n_envs
         batches = [
             EpisodeBatch(
-                seeds=tuple(seeds[i : i + n]), explore=explore,
-                generator_seed=cycle_seed(seeds[i], 1) if explore and generator is None else None,
-                random_eps=random_eps, keep_dataset_frames=explore and self.persistence.keeps_dataset_frames,
+                seeds=tuple(seeds[i : i + n]), explore=True, generator_seed=cycle_seed(seeds[i], 1),
+                random_eps=1.0 if warmup else None, keep_dataset_frames=self.persistence.keeps_dataset_frames,
             )
             for i in range(0, len(seeds), n)
         ]  # fmt: skip
         if self.ray_rollouts is not None:
-            if generator is not None:
-                raise ValueError("collect_episodes: a shared generator cannot drive episodes on Ray workers")
-            return self.ray_rollouts.collect(batches, self.policy)
-        keys = stored_keys(self.keys)
-        if generator is not None:
-            return [
-                run_episodes(
-                    self.vec_env, self.policy, self.processors, keys, self.horizon, seeds=list(b.seeds),
-                    explore=explore, generator=generator, random_eps=random_eps,
-                    keep_dataset_frames=b.keep_dataset_frames,
-                )
-                for b in batches
-            ]  # fmt: skip
-        return [b.run(self.vec_env, self.policy, self.processors, keys, self.horizon) for b in batches]
-
-    def collect(self, cycle: int) -> list[Rollouts]:
-        """The cycle's behaviour-policy episodes, from seeds of (seed, cycle)."""
-        t0 = time.perf_counter()
-        warmup = self.progress.episodes < self.cfg.online.warmup_episodes
-        seeds = cycle_episode_seeds(self.cfg.seed, cycle, self.episodes_per_cycle)
-        rollouts = self.collect_episodes(seeds, True, random_eps=1.0 if warmup else None)
+            rollouts = self.ray_rollouts.collect(batches, self.policy)
+        else:
+            keys = stored_keys(self.keys)
+            rollouts = [
+                b.run(self.vec_env, self.policy, self.processors, keys, self.horizon) for b in batches
+            ]
         self._phase_end(self.hooks.on_collect_end, t0, rollouts)
         return rollouts
 

@@ -45,7 +45,7 @@ class OnlineConfig:
     # Where training episodes are collected: "local" = this process's vector env; "ray" = num_workers Ray
     # actors, each with its own n_envs sub-envs and a CPU copy of the actor (docs/scaling.md; needs the
     # [distributed] extra). ray_address: an existing cluster ("auto", "host:6379", "ray://host:10001");
-    # None = a local Ray instance on this machine. Evaluation episodes stay local.
+    # None = a new local Ray instance on this machine. Evaluation episodes run on the learner.
     backend: str = "local"
     num_workers: int = 2
     ray_address: str | None = None

@@ -350,8 +350,6 @@ class OnlineTrainer:
         close_envs({self.cfg.env.type: {0: self.vec_env}})
         if self.ray_rollouts is not None:
             self.ray_rollouts.close()
-        if self.ray_rollouts is not None:
-            self.ray_rollouts.close()
 
 
 def train_metrics(rollouts: list[Rollouts]) -> dict[str, float]:

@@ -6,7 +6,6 @@ the checkpoint loads in ``lerobot-eval --policy.path``.
 launcher), so the 2-process CPU run goes through torchrun like a GPU one, and lerobot-train's
 ``Accelerator(cpu=True)`` picks gloo."""
 
-import json
 import os
 import subprocess
 import sys
@@ -15,6 +14,7 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file
 from test_lerobot_train import REPO_ID, make_tiny_reach_dataset
+from test_online_training import lerobot_eval
 
 BIN = Path(sys.executable).parent
 
@@ -59,26 +59,10 @@ def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
         torch.testing.assert_close(target_3[k], 0.98 * target_2[k] + 0.02 * online_3[k], rtol=1e-5, atol=1e-6)
     pretrained = out / "checkpoints" / "last" / "pretrained_model"
 
-    eval_dir = tmp_path / "eval"
-    proc = subprocess.run(
-        [
-            str(BIN / "lerobot-eval"),
-            f"--policy.path={pretrained}",
-            "--policy.device=cpu",
-            "--env.type=sawyer_reach",
-            "--env.obs_type=state",
-            "--env.episode_length=6",
-            "--eval.n_episodes=1",
-            "--eval.batch_size=1",
-            f"--output_dir={eval_dir}",
-        ],  # fmt: skip
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=env,
-    )
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
-    info = json.loads((eval_dir / "eval_info.json").read_text())
+    info = lerobot_eval(
+        pretrained, tmp_path / "eval", "--env.type=sawyer_reach", "--env.obs_type=state", "--env.episode_length=6",
+        "--eval.n_episodes=1", env=env,
+    )  # fmt: skip
     assert info["overall"]["n_episodes"] == 1
 
 

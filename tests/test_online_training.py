@@ -46,6 +46,15 @@ def _train(out: Path, *args: str) -> subprocess.CompletedProcess:
     return proc
 
 
+def lerobot_eval(pretrained: Path, eval_dir: Path, *args: str, env: dict[str, str] | None = None) -> dict:
+    """``lerobot-eval`` of a saved policy (CPU, one env at a time); its ``eval_info.json``."""
+    cmd = [str(BIN / "lerobot-eval"), f"--policy.path={pretrained}", "--policy.device=cpu", "--eval.batch_size=1",
+           f"--output_dir={eval_dir}", *args]  # fmt: skip
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env or _env())
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-6000:]
+    return json.loads((eval_dir / "eval_info.json").read_text())
+
+
 def _metrics(out: Path) -> list[dict]:
     return [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
 
@@ -68,25 +77,13 @@ def test_online_run_checkpoint_loads_in_lerobot_eval(tmp_path, env_type):
     assert (out / "checkpoints" / "000010" / "training_state" / "training_step.json").exists()
     _assert_input_stats_cover_every_cycle(out, pretrained)
 
-    eval_dir = tmp_path / "eval"
-    proc = subprocess.run(
-        [
-            str(BIN / "lerobot-eval"),
-            f"--policy.path={pretrained}",
-            *ENVS[env_type],
-            "--env.eval_reward=final_distance",
-            "--eval.n_episodes=2",
-            "--eval.batch_size=1",
-            "--policy.device=cpu",
-            f"--output_dir={eval_dir}",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env=_env(),
-    )
-    assert proc.returncode == 0, proc.stderr[-4000:]
-    overall = json.loads((eval_dir / "eval_info.json").read_text())["overall"]
+    overall = lerobot_eval(
+        pretrained,
+        tmp_path / "eval",
+        *ENVS[env_type],
+        "--env.eval_reward=final_distance",
+        "--eval.n_episodes=2",
+    )["overall"]
     assert 0.0 <= overall["pc_success"] <= 100.0
     mean_final_distance = -overall["avg_sum_reward"]  # eval_reward=final_distance
     assert 0.0 < mean_final_distance < 1.0

@@ -47,7 +47,7 @@ def bench_pushes(env: RopePushEnv, n: int, seed: int) -> dict:
     def crossing():
         if env.sim.push(env.sim.random_push_action(rng)) is False:  # rare: clipped at the region edge
             env.reset()
-        env._get_obs()  # what step() returns, rendering included
+        env.camera_observation()  # the rendering a step returns
 
     def uniform():
         env.step(rng.uniform(-1, 1, 4))

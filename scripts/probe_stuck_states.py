@@ -2,7 +2,7 @@
 toward the goal there (``lerobot_indicator.bench.policy_probe``).
 
     python scripts/probe_stuck_states.py --env.type=sawyer_reach --env.obs_type=rgbd --env.camera.height=64 \
-        --env.camera.width=64 --runs_dir=outputs/rgbd_reach/runs/reach_rgbd \
+        --env.camera.width=64 --runs_dirs='[outputs/rgbd_reach/runs/reach_rgbd,outputs/rgbd_reach/runs/reach_rgbd_low_utd]' \
         --out=docs/results/experiments_rgbd/stuck_states.json
 """
 
@@ -23,8 +23,8 @@ from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 @dataclass
 class ProbeConfig:
     env: EnvConfig
-    # Every <method>/seed_<n> below it with a final checkpoint is probed.
-    runs_dir: Path
+    # Every <method>/seed_<n> below each with a final checkpoint is probed.
+    runs_dirs: list[Path]
     out: Path
     episodes: int = 20
 
@@ -33,7 +33,7 @@ class ProbeConfig:
 def main(cfg: ProbeConfig) -> None:
     torch.set_num_threads(1)
     results = {}
-    for run in sorted(cfg.runs_dir.glob("*/seed_*")):
+    for run in sorted(run for runs_dir in cfg.runs_dirs for run in runs_dir.glob("*/seed_*")):
         path = run / "checkpoints" / "last" / "pretrained_model"
         if not path.exists():
             print(f"{run}: no checkpoints/last yet, skipped", flush=True)

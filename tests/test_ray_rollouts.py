@@ -80,8 +80,9 @@ def _train(
     finally:
         trainer.close()
     rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
-    for row in rows:
-        row.pop("wall_time_s")
+    for row in rows:  # wall times (wall_time_s, data_s, update_s) differ between any two runs
+        for key in [k for k in row if k.endswith("_s")]:
+            row.pop(key)
     weights = {k: v.clone() for k, v in trainer.policy.state_dict().items()}
     return rows, {"weights": weights, "replacements": replacements}
 

@@ -284,9 +284,8 @@ def n_step_return(
         frames = {k: batch[PATH + k][:, i] for k in keys}
         r = step_reward(frames, None if gt_path is None else gt_path[:, i])
         returns = returns + torch.where(path_valid[:, i], scale * r, 0.0)
-    steps = 1 + path_valid.sum(dim=1)
-    discount = torch.pow(torch.full_like(first_reward, config.gamma), steps.to(first_reward.dtype))
-    return returns, discount, {k: batch[PATH + k][:, -1] for k in keys}
+    # scale is gamma^(n'-1) after the loop: the bootstrap term is one discount further.
+    return returns, scale * config.gamma, {k: batch[PATH + k][:, -1] for k in keys}
 
 
 def indicator_ddpg_loss(

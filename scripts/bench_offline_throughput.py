@@ -4,10 +4,12 @@ Records ``--episodes`` RGB-D reach episodes twice with the recorder (``--use_vid
 seed; or takes them from ``--png_root`` / ``--video_root``), then, in one run on the same machine load:
 
 1. ``LeRobotDataset.__getitem__`` with the policy's delta indices (samples/s, PNG/TIFF decodes per sample);
-2. frame equality of the video copy, and of a copy with LeRobot's default (lossy) video encoders, against
+2. the per-key video decode of one sample: LeRobot's pyav call against the same call with a single-threaded
+   decoder (milliseconds per call);
+3. frame equality of the video copy, and of a copy with LeRobot's default (lossy) video encoders, against
    the PNG/TIFF frames (false positives / negatives of the indicator's bit-for-bit comparison);
-3. ``lerobot-train`` on each, reading its own logged ``data_s`` / ``updt_s`` (steps after the first two);
-4. ``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0`` (in-memory buffer): updates/s of a
+4. ``lerobot-train`` on each, reading its own logged ``data_s`` / ``updt_s`` (steps after the first two);
+5. ``lerobot-indicator-train --dataset.* --online.episodes_per_cycle=0`` (in-memory buffer): updates/s of a
    cycle and the share of a cycle spent sampling the buffer.
 
     python scripts/bench_offline_throughput.py --out docs/results/offline_throughput.json
@@ -28,14 +30,19 @@ import torch
 from lerobot.datasets.factory import resolve_delta_timestamps
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from lerobot_indicator.bench.dataset_loading import copy_as_video, equality_errors, loading_rates
+from lerobot_indicator.bench.dataset_loading import (
+    copy_as_video,
+    decode_call_costs,
+    equality_errors,
+    loading_rates,
+)
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
 BIN = Path(sys.executable).parent
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 REPO = "bench/rgbd"
 COMPARED = ["observation.images.front", "observation.images.front_depth"]
-PARTS = ["getitem", "equality", "lerobot_train", "offline"]
+PARTS = ["getitem", "decoder", "equality", "lerobot_train", "offline"]
 
 
 def run(cmd: list[str]) -> str:
@@ -79,6 +86,15 @@ def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:
     rates = loading_rates(datasets, samples)
     rates["video_over_png_samples_per_s"] = rates["video"]["samples_per_s"] / rates["png"]["samples_per_s"]
     return delta, rates
+
+
+def measure_decoder(root: Path, calls: int) -> dict:
+    """Per-key cost of one sample's video decode (episode 0's files) with the policy's delta window."""
+    meta = LeRobotDataset(REPO, root=root, video_backend="pyav").meta
+    videos = {key: root / meta.get_video_file_path(0, key) for key in meta.video_keys}
+    frames = meta.episodes["length"][0]
+    cfg = IndicatorDDPGConfig(device="cpu")
+    return decode_call_costs(videos, cfg.observation_delta_indices, meta.fps, frames, calls)
 
 
 def measure_equality(roots: dict[str, Path], lossy_root: Path) -> dict:
@@ -162,6 +178,8 @@ def main() -> None:
         for part in args.parts:  # in the order given
             if part == "getitem":
                 record["delta_timestamps_s"], record["getitem"] = measure_getitem(roots, args.getitem_samples)
+            elif part == "decoder":
+                record["decoder_ms_per_call"] = measure_decoder(roots["video"], args.getitem_samples)
             elif part == "equality":
                 record["frame_equality_vs_png"] = measure_equality(roots, Path(tmp) / "lossy")
             elif part == "offline":

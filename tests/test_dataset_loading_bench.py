@@ -36,3 +36,32 @@ def test_counts_false_positives_and_negatives_of_frame_equality():
     assert errors["frame_vs_goal_false_positives"] == 0
     assert errors[f"frames_differing.{KEY}"] == 1 and errors[f"frames_differing.{GOAL}"] == 3
     assert not any(v for k, v in equality_errors(reference, reference, [KEY]).items() if "false" in k)
+
+
+def test_single_threaded_decode_arm_decodes_the_frames_lerobot_returns(tmp_path):
+    # The decoder benchmark's comparison arm must decode the same frames as LeRobot's pyav call, only on one
+    # thread: a lossless 10-frame video with a distinct value per frame, queried at the policy's offsets.
+    import av
+    import numpy as np
+    from lerobot.datasets.video_utils import decode_video_frames_pyav
+
+    from lerobot_indicator.bench.dataset_loading import decode_single_threaded
+
+    path, fps = tmp_path / "v.mp4", 20
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream(
+            "hevc", rate=fps, options={"x265-params": "lossless=1:log-level=none", "g": "2"}
+        )
+        stream.width = stream.height = 16
+        stream.pix_fmt = "gbrp"
+        for i in range(10):
+            frame = av.VideoFrame.from_ndarray(np.full((16, 16, 3), 20 * i, dtype=np.uint8), format="rgb24")
+            out.mux(stream.encode(frame))
+        out.mux(stream.encode())
+    timestamps = [(2 + k) / fps for k in (0, 1, 2, 4)]
+    expected = decode_video_frames_pyav(path, timestamps, 0.5 / fps, return_uint8=True)
+    decoded = dict(decode_single_threaded(path, timestamps, is_depth=False))
+    assert max(decoded) >= max(timestamps) - 1e-6
+    got = np.stack([decoded[min(decoded, key=lambda t, q=q: abs(t - q))] for q in timestamps])
+    assert np.array_equal(got.transpose(0, 3, 1, 2), expected.numpy())
+    assert [int(x[0, 0, 0]) for x in got] == [40, 60, 80, 120]

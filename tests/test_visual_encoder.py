@@ -51,6 +51,12 @@ def test_presets_fill_the_conv_fields_and_explicit_values_win():
         ValueError, match=r"images of 16x16 px are too small for the 'drq' encoder's conv layers"
     ):
         policy_and_batch(size=16)
+    # The inverse-dynamics loss trains the shared encoder: the paper's separate encoders have none.
+    with pytest.raises(
+        IndicatorDDPGConfigError, match="inverse_dynamics=1.0 trains the shared image encoder"
+    ):
+        policy_and_batch(image_encoder="paper", inverse_dynamics=1.0)
+    assert policy_and_batch(inverse_dynamics=1.0)[0].critic.inverse is not None
 
 
 def test_random_shift_is_a_clamped_translation_shared_by_all_keys():

@@ -7,6 +7,9 @@
   episode (a relabelled goal o_{t'} against o_{t+1}, and each frame against the episode's goal) it counts
   the pairs a stored copy of the dataset calls equal where the lossless source does not (false positives)
   and the reverse (false negatives).
+- :func:`decode_call_costs`: what one video key of one sample costs in LeRobot's pyav decoder (a fresh
+  container and decoder per call, FFmpeg's default thread count) against the same call with a
+  single-threaded decoder, for the policy's delta window and for o_t alone.
 """
 
 from __future__ import annotations
@@ -14,10 +17,13 @@ from __future__ import annotations
 import time
 from collections import Counter
 from contextlib import contextmanager
+from pathlib import Path
 
+import av
 import torch
 from datasets.features import image as hf_image
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.datasets.video_utils import decode_video_frames_pyav
 
 from lerobot_indicator.keys import goal_key
 
@@ -137,3 +143,52 @@ def copy_as_video(source: LeRobotDataset, repo_id: str, root, **encoders) -> LeR
         copy.save_episode()
     copy.finalize()
     return LeRobotDataset(repo_id, root=root, video_backend="pyav")
+
+
+def decode_single_threaded(path: Path, timestamps: list[float], is_depth: bool) -> list[tuple[float, object]]:
+    """LeRobot's pyav decode loop (seek to the keyframe before the first timestamp, decode forward past the
+    last) with the decoder on one thread: every decoded frame as (timestamp, array)."""
+    decoded = []
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        stream.codec_context.thread_count = 1
+        container.seek(round(min(timestamps) / stream.time_base) - 1, backward=True, stream=stream)
+        for frame in container.decode(stream):
+            ts = float(frame.pts * stream.time_base)
+            decoded.append((ts, frame.to_ndarray(format="gray12le" if is_depth else "rgb24")))
+            if ts >= max(timestamps):
+                break
+    return decoded
+
+
+def decode_call_costs(
+    videos: dict[str, Path], offsets: list[int], fps: int, frames: int, calls: int, rounds: int = 3
+) -> dict[str, dict[str, float]]:
+    """Milliseconds per call, per video key: ``decode_video_frames_pyav`` (what ``lerobot-train`` runs per
+    key per sample) and the single-threaded loop, for ``offsets`` (the policy's delta indices) and for
+    ``[0]``, at start frames spread over the first ``frames - max(offsets)`` frames of one episode's file.
+    Interleaved rounds, so load on the machine hits every arm alike."""
+    starts = [i % max(1, frames - max(offsets)) for i in range(calls)]
+    arms = {
+        "lerobot_pyav": lambda path, ts, depth: decode_video_frames_pyav(
+            path, ts, 1 / (2 * fps), return_uint8=True, is_depth=depth
+        ),
+        "single_threaded_decoder": decode_single_threaded,
+    }
+    spent: dict[str, Counter] = {key: Counter() for key in videos}
+    for _ in range(rounds):
+        for key, path in videos.items():
+            depth = "depth" in key
+            for window_name, window in (("delta_window", offsets), ("o_t_only", [0])):
+                for arm, fn in arms.items():
+                    t0 = time.perf_counter()
+                    for start in starts:
+                        fn(path, [(start + k) / fps for k in window], depth)
+                    spent[key][f"{arm}.{window_name}_ms"] += time.perf_counter() - t0
+    out = {}
+    for key, totals in spent.items():
+        out[key] = {name: 1000 * total / (rounds * calls) for name, total in totals.items()}
+        out[key]["lerobot_over_single_threaded.delta_window"] = (
+            totals["lerobot_pyav.delta_window_ms"] / totals["single_threaded_decoder.delta_window_ms"]
+        )
+    return out

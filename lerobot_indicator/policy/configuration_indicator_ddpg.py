@@ -256,6 +256,13 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(f"tau must be in [0, 1], got {self.tau}")
         if self.image_encoder not in IMAGE_ENCODERS:
             raise ValueError(f"image_encoder must be one of {IMAGE_ENCODERS}, got {self.image_encoder!r}")
+        if self.inverse_dynamics < 0:
+            raise ValueError(f"inverse_dynamics must be >= 0 (0 = off), got {self.inverse_dynamics}")
+        if self.inverse_dynamics > 0 and self.image_encoder != "drq":
+            raise ValueError(
+                f"inverse_dynamics={self.inverse_dynamics} trains the shared image encoder, which "
+                f"image_encoder={self.image_encoder!r} does not have: use image_encoder=drq or inverse_dynamics=0"
+            )
         for name, value in ENCODER_PRESETS[self.image_encoder].items():
             if getattr(self, name) is None:
                 setattr(self, name, value)

@@ -3,6 +3,8 @@ on a state-based Sawyer reach dataset recorded for the run (noisy scripted polic
 ``lerobot_indicator.bench.ddp_loss``.
 
     MUJOCO_GL=egl .venv/bin/python scripts/bench_ddp_loss.py --out docs/results/ddp_loss_curve.json
+
+Writes the JSON and, beside it, the curves as PNG (same name).
 """
 
 from __future__ import annotations
@@ -52,6 +54,7 @@ def main() -> None:
     }
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(result, indent=2) + "\n")
+    ddp_loss.plot(result, a.out.with_suffix(".png"))
     print(json.dumps({k: v for k, v in result.items() if k != "runs"}, indent=2))
 
 

@@ -109,3 +109,27 @@ def compare(
         f"shape_vs_{base}_process": shape,
         "runs": runs,
     }
+
+
+def plot(result: dict, png: Path) -> None:
+    """Per-step critic loss of each process count (thin) and its window means (thick), one axis."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    window = result["window"]
+    for (n, run), color in zip(result["runs"].items(), ("tab:blue", "tab:orange"), strict=False):
+        label = f"{n} process{'es' if n != '1' else ''}, batch {run['batch_per_process']} each"
+        ax.plot(run["step"], run["critic_loss"], color=color, alpha=0.3, linewidth=0.8)
+        means = result["critic_loss_window_means"][n]
+        centres = [window * (i + 0.5) for i in range(len(means))]
+        ax.plot(centres, means, color=color, linewidth=2, marker="o", label=label)
+    ax.set_xlabel("lerobot-train step")
+    ax.set_ylabel("critic loss (main process)")
+    ax.set_title(f"lerobot-train, global batch {result['global_batch']}: 2 processes vs 1")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)

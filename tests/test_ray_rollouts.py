@@ -140,3 +140,46 @@ def test_wire_format_is_lossless_and_sends_goals_once():
     # uint8 frames, one goal per episode: (1 + 1/4) / 8 of the two float32 image arrays, plus the state.
     assert wire.nbytes() < (rgb.nbytes + goal.nbytes) / 4
     assert PackedArray.of(state).per_episode is False
+
+
+def test_ray_backend_records_and_resumes_as_the_local_backend(ray_cluster, local_run, tmp_path, monkeypatch):
+    # --record.* and --resume with Ray workers: interrupted in cycle 1's updates (after cycle 0's episodes
+    # and resume state were saved), then resumed, the run ends with the local backend's metrics, weights
+    # and recorded episodes.
+    from lerobot.datasets import LeRobotDataset
+
+    from lerobot_indicator.training.online import OnlineTrainer
+
+    def record(name: str) -> list[str]:
+        root = tmp_path / f"{name}_dataset"
+        return [f"--record.repo_id=local/{name}", f"--record.root={root}", "--record.checkpoint_every_s=0"]
+
+    local_rows, local_state = _train(tmp_path / "local", *record("local"))
+    assert local_rows == local_run[0]  # recording changes nothing the run computes
+    ray_args = ["--online.backend=ray", "--online.num_workers=2", *record("ray")]
+    optimise, calls = OnlineTrainer.optimise, []
+
+    def interrupted(self, *args):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return optimise(self, *args)
+
+    monkeypatch.setattr(OnlineTrainer, "optimise", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _train(tmp_path / "ray", *ray_args)
+    monkeypatch.setattr(OnlineTrainer, "optimise", optimise)
+    rows, state = _train(tmp_path / "ray", *ray_args, "--resume=true")
+    assert rows == local_rows
+    for k, v in local_state["weights"].items():
+        assert torch.equal(state["weights"][k], v), k
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    local_ds, ray_ds = (
+        LeRobotDataset(f"local/{n}", root=tmp_path / f"{n}_dataset", video_backend="pyav")
+        for n in ("local", "ray")
+    )
+    assert local_ds.num_episodes == ray_ds.num_episodes == 6 and len(local_ds) == len(ray_ds)
+    for i in range(len(local_ds)):
+        a, b = local_ds[i], ray_ds[i]
+        for key in ("action", "observation.state", "observation.goal_state", "episode_index", "next.reward"):
+            assert torch.equal(a[key], b[key]), (i, key)

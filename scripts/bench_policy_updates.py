@@ -1,7 +1,8 @@
 """Gradient updates/s of ``indicator_ddpg`` beside LeRobot 0.6.1's SAC, FLOPs per update and the CPU's peak.
 
 RGB-D arms at 64 and 100 px, batch 128, timed in one interleaved run (``lerobot_indicator.bench``): the
-paper's encoder, the default ("drq") encoder, each also with float32 convs, and LeRobot's SAC
+paper's encoder, the default ("drq") encoder, each also with float32 convs, "drq" with 3-step targets and the
+inverse-dynamics loss (the setting that learns RGB-D reach), and LeRobot's SAC
 (``gaussian_actor`` + ``SACAlgorithm``) on the same image size and batch, with its convs trained (as ours)
 and frozen (its config default); plus the state-based update (batch 256). For each arm the matmul/conv FLOPs
 of one update and their share of the measured peak. ``--dataset-cost`` also times what fetching future frames
@@ -37,6 +38,8 @@ ENCODERS = {
     "paper_fp32": {"image_encoder": "paper", "conv_precision": "float32"},
     "drq": {"image_encoder": "drq"},
     "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
+    # The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
+    "drq_n3_inverse_dynamics": {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0},
 }
 
 
@@ -44,8 +47,8 @@ def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
     arms = {}
     for size in sizes:
         features = rgbd_features(size)
-        batch = make_batch(features, batch_size, device)
         for name, config in ENCODERS.items():
+            batch = make_batch(features, batch_size, device, n_step=config.get("n_step", 1))
             arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config), batch)
         arms[f"lerobot_sac_{size}px"] = make_sac_update(
             (4, size, size), batch_size, device, freeze_vision_encoder=False
@@ -154,6 +157,8 @@ def main() -> None:
         ratios[f"{size}px"] = {
             "drq_over_paper": rate["drq"] / rate["paper"],
             "drq_over_paper_fp32": rate["drq"] / rate["paper_fp32"],
+            "drq_n3_inverse_dynamics_over_paper": rate["drq_n3_inverse_dynamics"] / rate["paper"],
+            "drq_n3_inverse_dynamics_over_drq": rate["drq_n3_inverse_dynamics"] / rate["drq"],
             "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
             "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
         }

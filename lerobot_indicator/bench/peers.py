@@ -19,6 +19,8 @@ from lerobot.rl.algorithms.sac import SACAlgorithm, SACAlgorithmConfig
 from lerobot.utils.constants import ACTION
 from torch.utils.flop_counter import FlopCounterMode
 
+from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
+
 IMAGE_KEY = "observation.images.front"
 
 # DefaultImageEncoder: 7x7/2, 5x5/2, 3x3/2, 3x3/2 convolutions without padding.
@@ -196,8 +198,9 @@ def measure_peaks(seconds: float = 2.0, device: str = "cpu") -> dict[str, float]
     Three measurements of about ``seconds`` each, with whatever ``torch.get_num_threads()`` is set:
     ``sgemm_256_gflops`` (256x256 @ 256x256, small-GEMM regime like MLP layers at small batch),
     ``sgemm_1024_gflops`` (1024^3, large-GEMM near-peak regime) and ``conv3x3_32ch_gflops`` (forward-only
-    3x3 conv, 32->32 channels, padding 1, no bias, batch 128, 32x32 input, channels_last). FLOPs per
-    call come from FlopCounterMode, as in ``matmul_conv_flops``, so the ratios are consistent.
+    3x3 conv, 32->32 channels, padding 1, no bias, batch 128, 32x32 input, channels_last), and where the
+    device computes bf16 natively the same conv under bf16 autocast. FLOPs per call come from
+    FlopCounterMode, as in ``matmul_conv_flops``, so the ratios are consistent.
     """
     dev = torch.device(device)
     results: dict[str, float] = {}
@@ -220,6 +223,15 @@ def measure_peaks(seconds: float = 2.0, device: str = "cpu") -> dict[str, float]
             return conv(x)
 
         results["conv3x3_32ch_gflops"] = _best_rate(conv_fwd, _count_flops(conv_fwd), seconds, dev)
+        if native_bf16(dev.type):  # the convs' precision under conv_precision=auto here
+
+            def conv_bf16() -> torch.Tensor:
+                with torch.autocast(dev.type, dtype=torch.bfloat16):
+                    return conv(x)
+
+            results["conv3x3_32ch_bf16_autocast_gflops"] = _best_rate(
+                conv_bf16, _count_flops(conv_fwd), seconds, dev
+            )
     return results
 
 

@@ -43,21 +43,29 @@ def make_policy(features: Features, device: str = "cpu", **config: object) -> In
     return IndicatorDDPGPolicy(cfg).to(device)
 
 
-def make_batch(features: Features, batch_size: int, device: str = "cpu", seed: int = 0) -> dict:
-    """A transition batch with random frames: 3-channel images uint8, other keys float32."""
+def make_batch(
+    features: Features, batch_size: int, device: str = "cpu", seed: int = 0, n_step: int = 1
+) -> dict:
+    """A transition batch with random frames: 3-channel images uint8, other keys float32; with ``n_step`` > 1
+    also the path frames o_{t+2..t+n} (all inside the episode)."""
     gen = torch.Generator().manual_seed(seed)
     batch = {
         "action": torch.rand(batch_size, 3, generator=gen) * 2 - 1,
         core.HAS_FUTURE: torch.ones(batch_size, dtype=torch.bool),
     }
+    path = (n_step - 1,) if n_step > 1 else None
+    if path:
+        batch[core.PATH_VALID] = torch.ones(batch_size, *path, dtype=torch.bool)
     for key, (ftype, shape) in features.items():
-        for name in (key, core.NEXT + key, core.FUTURE + key, goal_key(key)):
+        names = [key, core.NEXT + key, core.FUTURE + key, goal_key(key)] + ([core.PATH + key] if path else [])
+        for name in names:
+            size = (batch_size, *(path if name.startswith(core.PATH) else ()), *shape)
             if ftype is FeatureType.VISUAL and shape[0] == 3:
-                batch[name] = torch.randint(0, 256, (batch_size, *shape), generator=gen, dtype=torch.uint8)
+                batch[name] = torch.randint(0, 256, size, generator=gen, dtype=torch.uint8)
             elif ftype is FeatureType.VISUAL:
-                batch[name] = torch.randint(300, 2000, (batch_size, *shape), generator=gen).float()
+                batch[name] = torch.randint(300, 2000, size, generator=gen).float()
             else:
-                batch[name] = torch.randn(batch_size, *shape, generator=gen)
+                batch[name] = torch.randn(*size, generator=gen)
     return {k: v.to(device) for k, v in batch.items()}
 
 

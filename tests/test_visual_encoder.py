@@ -6,7 +6,7 @@ import pytest
 import torch
 from test_indicator_core import _losses
 
-from lerobot_indicator.bench.updates import make_batch, make_policy, rgbd_features
+from lerobot_indicator.bench.updates import STATE_FEATURES, make_batch, make_policy, rgbd_features
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy import networks_indicator_ddpg as networks
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfigError
@@ -57,6 +57,10 @@ def test_presets_fill_the_conv_fields_and_explicit_values_win():
     ):
         policy_and_batch(image_encoder="paper", inverse_dynamics=1.0)
     assert policy_and_batch(inverse_dynamics=1.0)[0].critic.inverse is not None
+    with pytest.raises(
+        ValueError, match=r"keys \['observation.state'\] hold no image: use inverse_dynamics=0"
+    ):
+        make_policy(STATE_FEATURES, inverse_dynamics=1.0)
 
 
 def test_random_shift_is_a_clamped_translation_shared_by_all_keys():

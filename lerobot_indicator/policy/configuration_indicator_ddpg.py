@@ -413,6 +413,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(
                 f"output features must contain {ACTION!r}, got {list(self.output_features or {})}"
             )
+        if self.inverse_dynamics > 0 and not visual:
+            raise ValueError(
+                f"inverse_dynamics={self.inverse_dynamics} trains the shared image encoder, and the observation "
+                f"keys {self.observation_keys} hold no image: use inverse_dynamics=0"
+            )
         keep = self.observation_keys + self.goal_keys
         self.input_features = {k: features[k] for k in keep}
 

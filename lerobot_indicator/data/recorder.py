@@ -618,11 +618,15 @@ def write_episode(
     for frame in frames:
         for key in video_depth:
             check_depth_range(key, frame[key])
-    # Copies: frames that came over Ray's object store are read-only arrays, which torch will not wrap.
-    goal = {k: torch.from_numpy(np.array(frames[0][goal_key(k)]))[None] for k in reward_keys}
+    # np.require copies only arrays torch will not wrap: read-only ones (frames from Ray's object store).
+    goal = {
+        k: torch.from_numpy(np.require(frames[0][goal_key(k)], requirements="CW"))[None] for k in reward_keys
+    }
     horizon = len(actions)
     for t, action in enumerate(actions):
-        reached = {k: torch.from_numpy(np.array(frames[t + 1][k]))[None] for k in reward_keys}
+        reached = {
+            k: torch.from_numpy(np.require(frames[t + 1][k], requirements="CW"))[None] for k in reward_keys
+        }
         reward = float(indicator_reward(reached, goal, r_pos, r_neg)[0])
         dataset.add_frame(
             {

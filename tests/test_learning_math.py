@@ -192,6 +192,40 @@ def test_critic_loss_is_mean_squared_td_error_with_target_networks_on_next_obs(m
         assert differs(((q - wrong) ** 2).mean(), expected)
 
 
+@pytest.mark.parametrize("scale", ["paper", "return"])
+def test_critic_output_scale_multiplies_every_q_and_keeps_the_initial_q(monkeypatch, scale):
+    """critic_output_scale="return": Q = T MLP(...) for the online and the target critic (T = 1/(1-gamma) = 4),
+    in Q(o, g, a), in the TD target and in the actor's Q; a critic whose last layer has zero weights gives
+    Q = initial_q for every input under either scale. The logged q_std is Q's population std over the batch."""
+    s = {"paper": 1.0, "return": float(T)}[scale]
+    policy = make_policy(p_next=0.0, p_future=0.0, filter=False, critic_output_scale=scale)
+    for critic in (policy.critic, policy.target_critic):
+        assert linears(critic)[-1].bias.item() == pytest.approx(policy.config.initial_q / s)
+    set_policy_weights(policy)
+    with torch.no_grad():  # keep y = r + gamma Q' inside (q_min, q_max) = (-4, 4)
+        for critic in (policy.critic, policy.target_critic):
+            linears(critic)[-1].weight.mul_(0.25 / s)
+            linears(critic)[-1].bias.fill_(0.0)
+    batch = batch_of(OBS, NXT, GOALS, ACT)
+    _, critic_loss, actor_loss, _, _, stats = LossSpy(monkeypatch).run(policy, batch)
+    o, o1, g, a = batch[STATE], batch[core.NEXT + STATE], batch[GOAL], batch["action"]
+    r = torch.where(torch.tensor(POSITIVE_ROWS), 1.0, -1.0)
+    pa, qc, tpa, tqc = (
+        weights(n) for n in (policy.actor, policy.critic, policy.target_actor, policy.target_critic)
+    )
+    q = s * q_ref(qc, o, g, a)
+    y = r + 0.75 * s * q_ref(tqc, o1, g, pi_ref(tpa, o1, g))
+    assert bool((y.abs() < T).all()), "this test wants y strictly inside the bounds"
+    close(critic_loss, ((q - y) ** 2).mean())
+    pi = pi_ref(pa, o, g)
+    close(actor_loss, (-s * q_ref(qc, o, g, pi) + (pi**2).mean(dim=1)).mean())
+    close(torch.tensor(stats["q_std"]), q.std(unbiased=False))
+    with torch.no_grad():
+        linears(policy.critic)[-1].weight.zero_()
+        linears(policy.critic)[-1].bias.fill_(policy.config.initial_q / s)
+    close(policy.critic({STATE: o}, {STATE: g}, a), torch.full((len(OBS),), policy.config.initial_q))
+
+
 @pytest.mark.parametrize("bias, bound", [(1000.0, "q_max"), (-1000.0, "q_min")])
 def test_td_target_is_clipped_at_both_bounds_by_the_target_critic(monkeypatch, bias, bound):
     """y = clip(r + gamma Q', q_min, q_max): with the target critic's output bias at +-1000, every y is

@@ -371,3 +371,23 @@ def test_hooks_see_every_phase_with_its_result(tmp_path):
         assert phase.seconds > 0
     phases = sum(e[1].seconds for e in events if e[0] in ("on_collect_end", "on_update_end", "on_eval_end"))
     assert phases < sum(e[1].seconds for e in ends)
+
+
+def test_constant_critic_warning_fires_once_below_the_threshold(caplog):
+    """A cycle whose mean Q std over the batch is below CONSTANT_Q_STD logs one warning naming the fix; a
+    varying critic, a stats dict without q_std and a second constant cycle log nothing."""
+    import logging
+    from types import SimpleNamespace
+
+    from lerobot_indicator.training.online import CONSTANT_Q_STD, OnlineTrainer
+
+    trainer = SimpleNamespace(_warned_constant_critic=False, progress=SimpleNamespace(step=700))
+    warn = OnlineTrainer._warn_if_critic_is_constant
+    with caplog.at_level(logging.WARNING):
+        warn(trainer, {"q_mean": 1.8, "q_std": CONSTANT_Q_STD})
+        warn(trainer, {"q_mean": 1.8})
+        assert not caplog.records
+        warn(trainer, {"q_mean": 1.8, "q_std": 2e-6})
+        warn(trainer, {"q_mean": 1.8, "q_std": 1e-6})
+    assert len(caplog.records) == 1
+    assert "step 700" in caplog.text and "--policy.critic_output_scale=return" in caplog.text

@@ -391,3 +391,12 @@ def test_horizon_comes_from_the_data_and_a_different_given_value_is_an_error():
         dataset_horizon(SimpleNamespace(repo_id="u/mixed", episodes={"length": [4, 26]}))
     # The paper's natural initial Q, R-/(1-gamma) = -25 at T = 25, is accepted despite float rounding.
     IndicatorDDPGConfig(device="cpu", horizon=25, q_init=-25.0)
+
+
+def test_critic_output_scale_is_one_or_the_horizon_and_is_checked():
+    assert IndicatorDDPGConfig(device="cpu", horizon=25).q_output_scale == 1.0
+    assert IndicatorDDPGConfig(device="cpu", horizon=25, critic_output_scale="return").q_output_scale == 25.0
+    with pytest.raises(
+        IndicatorDDPGConfigError, match=r"critic_output_scale must be one of \('paper', 'return'\)"
+    ):
+        IndicatorDDPGConfig(device="cpu", critic_output_scale="popart")

@@ -35,6 +35,7 @@ ENCODER_PRESETS = {
 }
 IMAGE_ENCODERS = tuple(ENCODER_PRESETS)
 CONV_PRECISIONS = ("auto", "float32", "bfloat16")
+CRITIC_OUTPUT_SCALES = ("paper", "return")
 
 
 class IndicatorDDPGConfigError(Exception):
@@ -106,6 +107,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # is not fooled early; None = R-/(1-gamma), the lowest possible return. Any value well below q0 keeps
     # filtering safe; see docs/policy.md for the effect on learning speed.
     q_init: float | None = None
+    # Units of the critic's output layer: "paper" (Q itself) or "return": the MLP predicts (1-gamma) Q, a
+    # per-step reward in [R-, R+], and is scaled by 1/(1-gamma). With Q starting at R-/(1-gamma) and tanh
+    # layers, Adam's fastest way to move Q by tens is to saturate the last hidden layer to a constant; once
+    # saturated, Q stops depending on the input (a pixel Oracle seed never learned: docs/policy.md).
+    critic_output_scale: str = "paper"
 
     # Offsets t'-t of the future frames fetched from a dataset in lerobot-train (all >= 2). One valid
     # offset is picked uniformly per sample; docs/policy.md compares this with uniform t' in {t+2..T}.
@@ -227,6 +233,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(f"filter_q must be one of {FILTER_Q_SOURCES}, got {self.filter_q!r}")
         if self.filter_start not in FILTER_STARTS:
             raise ValueError(f"filter_start must be one of {FILTER_STARTS}, got {self.filter_start!r}")
+        if self.critic_output_scale not in CRITIC_OUTPUT_SCALES:
+            raise ValueError(
+                f"critic_output_scale must be one of {CRITIC_OUTPUT_SCALES}, got {self.critic_output_scale!r}"
+            )
         if not 0 < self.filter_calibration <= 1:
             raise ValueError(f"filter_calibration must be in (0, 1], got {self.filter_calibration}")
         if not self.reward_conv_channels or self.reward_latent_dim < 1:
@@ -345,6 +355,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if self.q_init is not None:
             return self.q_init
         return self.q_min if self.q_min > float("-inf") else 0.0
+
+    @property
+    def q_output_scale(self) -> float:
+        """What the critic's MLP output is multiplied by (``critic_output_scale``): 1, or 1/(1-gamma) = T."""
+        return self.discounted_steps if self.critic_output_scale == "return" else 1.0
 
     @property
     def q_max(self) -> float:

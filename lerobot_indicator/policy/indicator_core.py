@@ -398,6 +398,8 @@ def indicator_ddpg_loss(
         "critic_loss": critic_loss.detach(),
         "actor_loss": actor_loss.detach(),
         "q_mean": masked_mean(q.detach(), valid_f),
+        # ~0 when the critic no longer depends on its input (a saturated last tanh layer): OnlineTrainer warns.
+        "q_std": masked_mean((q.detach() - masked_mean(q.detach(), valid_f)) ** 2, valid_f).sqrt(),
         "q_target_mean": masked_mean(target, valid_f),
         "frac_positive": masked_mean(positive, valid_f),
         "frac_filtered": masked_mean((~keep).float(), valid_f),

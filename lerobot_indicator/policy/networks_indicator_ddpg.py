@@ -284,7 +284,8 @@ class Actor(GoalConditioned):
 
 
 class Critic(GoalConditioned):
-    """Q(o, o_g, a) = MLP([enc(o), enc(o_g), a]); output bias starts at ``config.initial_q`` (Q initialised low).
+    """Q(o, o_g, a) = s MLP([enc(o), enc(o_g), a]) with s = ``config.q_output_scale``; Q starts at
+    ``config.initial_q`` (the output bias, Q initialised low).
 
     ``encode`` and ``head`` are split so a DDPG step encodes (o, o_g) once for Q(o, o_g, a) and
     Q(o, o_g, pi(o, o_g)): for images the conv encoder is most of an update's cost. ``encoder``: the actor's,
@@ -302,8 +303,9 @@ class Critic(GoalConditioned):
         self.net = mlp(2 * self.encoder.out_dim + config.action_dim, config.hidden_dims, 1)
         # Low initial Q keeps every Q below q0, so reward filtering cannot fire before the critic has learnt
         # (paper section 5.3). The minimum achievable return is the natural "low" value.
+        self.output_scale = config.q_output_scale
         last: nn.Linear = self.net[-1]
-        nn.init.constant_(last.bias, config.initial_q)
+        nn.init.constant_(last.bias, config.initial_q / self.output_scale)
         # a_t from (enc(o_t), enc(o_{t+1})): an auxiliary loss on the encoder (config.inverse_dynamics).
         self.inverse = None
         if config.inverse_dynamics > 0:
@@ -314,14 +316,14 @@ class Critic(GoalConditioned):
         ``action`` (the actor's loss) but never the critic."""
         x = torch.cat([features, action], dim=1)
         if not frozen:
-            return self.net(x).squeeze(-1)
+            return self.output_scale * self.net(x).squeeze(-1)
         for layer in self.net:
             x = (
                 F.linear(x, layer.weight.detach(), layer.bias.detach())
                 if isinstance(layer, nn.Linear)
                 else layer(x)
             )
-        return x.squeeze(-1)
+        return self.output_scale * x.squeeze(-1)
 
     def forward(self, obs: dict[str, Tensor], goal: dict[str, Tensor], action: Tensor) -> Tensor:
         return self.head(self.encode(obs, goal), action)

@@ -42,6 +42,10 @@ from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import EpisodeBatch, Processors, Rollouts, run_episodes, stored_keys
 from lerobot_indicator.training.run_state import METRICS_FILE, Progress, RunPersistence
 
+# A cycle's mean std of Q over the batch below this: the critic ignores its inputs (a freshly built critic's
+# is ~0.1-1, a saturated one's ~1e-6).
+CONSTANT_Q_STD = 1e-3
+
 
 def cycle_seed(seed: int, cycle: int) -> int:
     return (seed * 1_000_003 + cycle) % (2**63)
@@ -265,6 +269,7 @@ class OnlineTrainer:
         record["wall_time_s"] = self.progress.wall_time_s
         self.persistence.run_dir.append_metrics(record)
         self._log(record)
+        self._warn_if_critic_is_constant(stats)
         if cfg.save_checkpoint and due(cfg.save_freq):
             checkpoint = self.save_checkpoint()
             if self.wandb is not None:
@@ -292,6 +297,7 @@ class OnlineTrainer:
                     self.policy.set_observation_stats(self.buffer.observation_stats())
         self.persistence.start(self.progress)
         self._last_eval: dict[str, float] = {}
+        self._warned_constant_critic = False
 
     def _cycle_randomness(self, cycle: int) -> tuple[np.random.Generator, torch.Generator]:
         """Everything random in a cycle comes from (seed, cycle), so a resumed run replays it exactly."""
@@ -306,6 +312,21 @@ class OnlineTrainer:
     def _phase_end(self, hook, t0: float, result) -> None:
         if hook is not None:
             hook(self._phase(time.perf_counter() - t0), result)
+
+    def _warn_if_critic_is_constant(self, stats: dict[str, float]) -> None:
+        """Once per run: a critic whose Q no longer varies over the batch has stopped learning."""
+        q_std = stats.get("q_std")
+        if self._warned_constant_critic or q_std is None or q_std >= CONSTANT_Q_STD:
+            return
+        self._warned_constant_critic = True
+        logging.warning(
+            "the critic gives the same Q (%.3g, std %.2g over the batch) for every input at step %d: its last "
+            "tanh layer has saturated and gets no gradient, so this run will not learn; rerun with "
+            "--policy.critic_output_scale=return (docs/policy.md)",
+            stats.get("q_mean", float("nan")),
+            q_std,
+            self.progress.step,
+        )
 
     def _log(self, record: dict) -> None:
         if self.wandb is not None:

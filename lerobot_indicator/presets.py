@@ -59,6 +59,11 @@ VARIANTS["indicator_balance_filter_inverse_dynamics"] = [
 ]
 for _m in ("oracle", "indicator", "indicator_balance_filter"):
     VARIANTS[f"{_m}_n3_inverse_dynamics"] = [*VARIANTS[f"{_m}_n3"], "--policy.inverse_dynamics=1.0"]
+# The critic's MLP predicting (1-gamma) Q (docs/policy.md): an Oracle seed whose critic saturated learns with it.
+VARIANTS["oracle_n3_inverse_dynamics_return_scale"] = [
+    *VARIANTS["oracle_n3_inverse_dynamics"],
+    "--policy.critic_output_scale=return",
+]
 # The paper's encoder with the same 3-step targets (it has no shared encoder for the inverse-dynamics loss).
 VARIANTS["indicator_balance_filter_paper_encoder_n3"] = [
     *VARIANTS["indicator_balance_filter_paper_encoder"],
@@ -95,6 +100,7 @@ LABELS = {
     "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
     "oracle_n3_inverse_dynamics": "Oracle, 3-step, inverse dynamics",
     "indicator_n3_inverse_dynamics": "Indicator, 3-step, inverse dynamics",
+    "oracle_n3_inverse_dynamics_return_scale": "Oracle, 3-step, inverse dynamics, critic output x T",
     "indicator_balance_filter_paper_encoder_n3": "Indicator+Balance+Filter, paper encoder, 3-step",
     "oracle_no_augmentation": "Oracle, no augmentation",
     "indicator_balance_filter_inverse_dynamics_no_augmentation": "Indicator+Balance+Filter, inverse dynamics, no augmentation",
@@ -121,6 +127,7 @@ STYLES = {
     "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
     "oracle_n3_inverse_dynamics": ("navy", "-"),
     "indicator_n3_inverse_dynamics": ("darkorange", "-"),
+    "oracle_n3_inverse_dynamics_return_scale": ("navy", "--"),
     "indicator_balance_filter_paper_encoder_n3": ("dimgray", "-"),
     "oracle_no_augmentation": ("tab:blue", ":"),
     "indicator_balance_filter_inverse_dynamics_no_augmentation": ("tab:brown", "--"),

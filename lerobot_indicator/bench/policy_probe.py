@@ -17,6 +17,7 @@ import torch
 from lerobot.envs import make_env
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
+from torch import Tensor
 
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
@@ -90,3 +91,56 @@ def stuck_state_probe(
         "critic_best_moves_away": (counts["critic_away"] / states).tolist(),
         "critic_best_stays": (counts["critic_zero"] / states).tolist(),
     }
+
+
+def critic_saturation(critic: torch.nn.Module, obs: dict, goal: dict, actions: Tensor) -> dict:
+    """Whether the critic's Q still depends on its input: per hidden tanh layer, the fraction of units at
+    |h| > 0.99 over the batch and their mean std across it; Q's std over the batch (row i with ``actions[i]``)
+    and over all of ``actions`` for the first (o, g). A layer whose units are all saturated passes no gradient."""
+    layers: dict[str, Tensor] = {}
+    hooks = [
+        m.register_forward_hook(lambda _m, _i, out, name=name: layers.__setitem__(name, out))
+        for name, m in critic.net.named_children()
+        if isinstance(m, torch.nn.Tanh)
+    ]
+    try:
+        with torch.no_grad():
+            features = critic.encode(obs, goal)
+            n = len(features)
+            q_actions = critic.head(features[:1].expand(n, -1), actions)
+            q_rows = critic.head(features, actions)  # last, so the hooks hold the batch's activations
+    finally:
+        for h in hooks:
+            h.remove()
+    return {
+        "frames": n,
+        "q_mean": float(q_rows.mean()),
+        "q_std_over_batch": float(q_rows.std(unbiased=False)),
+        "q_std_over_actions": float(q_actions.std(unbiased=False)),
+        "hidden_layers": [
+            {"saturated_fraction": float((h.abs() > 0.99).float().mean()), "unit_std": float(h.std(0).mean())}
+            for h in layers.values()
+        ],
+    }
+
+
+def env_frames(policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int, steps: int, seed: int = 0):
+    """(obs, goal) dicts of ``episodes`` x ``steps`` frames on evaluation goals, under uniform random actions."""
+    keys = policy.config.observation_keys
+    vec_env = make_env(env_cfg, n_envs=1)[env_cfg.type][0]
+    env_pre, _ = make_env_pre_post_processors(env_cfg, policy.config)
+    rng = np.random.default_rng(seed)
+    frames = []
+    try:
+        for episode in range(episodes):
+            obs, _ = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
+            for _ in range(steps):
+                frames.append(env_batch(obs, vec_env, env_pre))
+                action = rng.uniform(-1, 1, (1, policy.config.action_dim)).astype(np.float32)
+                obs, *_ = vec_env.step(action)
+    finally:
+        vec_env.close()
+    return (
+        {k: torch.cat([f[k] for f in frames]) for k in keys},
+        {k: torch.cat([f[goal_key(k)] for f in frames]) for k in keys},
+    )

@@ -43,8 +43,9 @@ demo-rgbd: install
 
 # Mutation testing (mutmut, the `mutation` extra) of the learning core, the replay buffer and the online
 # trainer's batch assembly against their fast tests; settings in pyproject.toml [tool.mutmut]. Not part of
-# `make test`: it runs every mutant (about 1200). mutmut keeps its verdicts in mutants/, so a rerun only
-# tests what changed. Report: docs/results/mutation.json (+ mutation.md, the argued survivors).
+# `make test`: it runs every mutant (about 1500, ~15 min on 2 idle cores). mutmut keeps its verdicts in
+# mutants/ and reruns the mutants of changed functions only, not those whose tests changed: after a test
+# change, `rm -rf mutants` first. Report: docs/results/mutation.json (+ mutation.md, the argued survivors).
 MUTATION_JOBS ?= 2
 mutation: install
 	$(PY) -m pip install -q --disable-pip-version-check -e '.[mutation]'

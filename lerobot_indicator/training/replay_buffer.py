@@ -38,7 +38,9 @@ def pack_exactly(value: np.ndarray, dtype: np.dtype, scale: float) -> np.ndarray
     value = np.asarray(value, dtype=np.float32)
     info = np.iinfo(dtype)
     scaled = np.rint(value * np.float32(scale))
-    if scaled.size and (scaled.min() < info.min or scaled.max() > info.max):
+    if scaled.size and not (
+        np.isfinite(scaled).all() and info.min <= scaled.min() and scaled.max() <= info.max
+    ):
         return None
     packed = scaled.astype(dtype)
     # Bit patterns, not values: -0.0 packs to 0 and would come back as +0.0 (they compare equal as floats).
@@ -140,8 +142,13 @@ class EpisodeReplayBuffer:
             ground_truth: optional ``gt_achieved_goal`` ``(T + 1, g)`` and ``gt_desired_goal`` ``(g,)``.
         """
         T = self.horizon
-        if actions.shape[0] != T:
-            raise ValueError(f"episode has {actions.shape[0]} actions, buffer horizon is {T}")
+        if actions.ndim != 2 or actions.shape[0] != T:
+            raise ValueError(
+                f"episode actions have shape {actions.shape}, expected (T, action_dim) with T = {T}"
+            )
+        achieved = None if ground_truth is None else ground_truth.get(GT_ACHIEVED_GOAL)
+        if achieved is not None and np.ndim(achieved) != 2:
+            raise ValueError(f"{GT_ACHIEVED_GOAL} has shape {np.shape(achieved)}, expected (T + 1, goal_dim)")
         for key, value in observations.items():
             if not is_goal_key(key) and value.shape[0] != T + 1:
                 raise ValueError(f"observation {key!r} has {value.shape[0]} steps, expected T + 1 = {T + 1}")

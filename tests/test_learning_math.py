@@ -131,6 +131,20 @@ class LossSpy:
         return total, critic, actor, critic_mask, actor_mask, stats
 
 
+def loss_and_stats(policy: IndicatorDDPGPolicy, batch: dict, seed: int = 0, reward_model=None):
+    """The core's loss and its stats (0-d tensors), with the policy's networks and config."""
+    return core.indicator_ddpg_loss(
+        batch,
+        policy.actor,
+        policy.critic,
+        policy.target_actor,
+        policy.target_critic,
+        policy.config,
+        torch.Generator().manual_seed(seed),
+        reward_model,
+    )
+
+
 def close(actual: torch.Tensor, expected: torch.Tensor) -> None:
     torch.testing.assert_close(actual.detach(), expected.detach(), rtol=RTOL, atol=ATOL)
 

@@ -21,6 +21,7 @@ from test_learning_math import (
     close,
     differs,
     linears,
+    loss_and_stats,
     make_policy,
     mlp_ref,
     pi_ref,
@@ -376,15 +377,7 @@ def test_image_loss_creates_its_tensors_on_the_batch_device(monkeypatch):
 
     def loss() -> Tensor:
         torch.manual_seed(5)
-        total, _ = core.indicator_ddpg_loss(
-            batch,
-            policy.actor,
-            policy.critic,
-            policy.target_actor,
-            policy.target_critic,
-            policy.config,
-            torch.Generator().manual_seed(3),
-        )
+        total, _ = loss_and_stats(policy, batch, seed=3)
         return total
 
     expected = loss()
@@ -519,15 +512,7 @@ def test_image_loss_matches_the_reference(monkeypatch, n_step, inverse_dynamics,
     shifts = record_shifts(monkeypatch)
     online = count_frames(policy.critic.encoder)
     torch.manual_seed(5)
-    total, stats = core.indicator_ddpg_loss(
-        batch,
-        policy.actor,
-        policy.critic,
-        policy.target_actor,
-        policy.target_critic,
-        policy.config,
-        torch.Generator().manual_seed(RELABEL_SEED),
-    )
+    total, stats = loss_and_stats(policy, batch, seed=RELABEL_SEED)
     (shift,) = shifts
     obs, nxt, a = batch[IMG], batch[core.NEXT + IMG], batch["action"]
     valid = batch[core.NEXT_VALID]

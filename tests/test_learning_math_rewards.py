@@ -31,6 +31,7 @@ from test_learning_math import (
     col,
     filter_batch_and_policy,
     linears,
+    loss_and_stats,
     make_policy,
     pi_ref,
     q_ref,
@@ -76,20 +77,6 @@ def mask(*rows: int, n: int = B) -> Tensor:
     out = torch.zeros(n, dtype=torch.bool)
     out[list(rows)] = True
     return out
-
-
-def loss_and_stats(policy: IndicatorDDPGPolicy, batch: dict, seed: int = 0, reward_model=None):
-    """The core's loss and its stats (0-d tensors), with the policy's networks and config."""
-    return core.indicator_ddpg_loss(
-        batch,
-        policy.actor,
-        policy.critic,
-        policy.target_actor,
-        policy.target_critic,
-        policy.config,
-        torch.Generator().manual_seed(seed),
-        reward_model,
-    )
 
 
 def constant_critics(policy: IndicatorDDPGPolicy, q: float = 0.3) -> None:

@@ -3,7 +3,8 @@
 Records ``--episodes`` RGB-D reach episodes twice with the recorder (``--use_videos=false`` / ``true``, same
 seed; or takes them from ``--png_root`` / ``--video_root``), then, in one run on the same machine load:
 
-1. ``LeRobotDataset.__getitem__`` with the policy's delta indices (samples/s, PNG/TIFF decodes per sample);
+1. ``LeRobotDataset.__getitem__`` with the policy's delta indices (samples/s, PNG/TIFF decodes per sample),
+   and on the video copy without delta indices (one frame per key: the reader's per-sample floor);
 2. the per-key video decode of one sample: LeRobot's pyav call against the same call with a single-threaded
    decoder (milliseconds per call);
 3. frame equality of the video copy, and of a copy with LeRobot's default (lossy) video encoders, against
@@ -43,6 +44,7 @@ ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_
 REPO = "bench/rgbd"
 COMPARED = ["observation.images.front", "observation.images.front_depth"]
 PARTS = ["getitem", "decoder", "equality", "lerobot_train", "offline"]
+ONE_FRAME = "video_one_frame_per_key"
 
 
 def run(cmd: list[str]) -> str:
@@ -74,7 +76,8 @@ def lerobot_train(root: Path, out: Path, batch_size: int, steps: int, num_worker
 
 
 def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:
-    """``__getitem__`` as lerobot-train builds the dataset (policy delta indices, uint8 video frames)."""
+    """``__getitem__`` as lerobot-train builds the dataset (policy delta indices, uint8 video frames), and the
+    video copy without delta indices (one frame per key): the per-sample floor of LeRobot's reader."""
     cfg = IndicatorDDPGConfig(device="cpu")
     datasets, delta = {}, None
     for name, root in roots.items():
@@ -83,9 +86,25 @@ def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:
         datasets[name] = LeRobotDataset(
             REPO, root=root, video_backend="pyav", return_uint8=True, delta_timestamps=delta
         )
+    datasets[ONE_FRAME] = LeRobotDataset(REPO, root=roots["video"], video_backend="pyav", return_uint8=True)
     rates = loading_rates(datasets, samples)
     rates["video_over_png_samples_per_s"] = rates["video"]["samples_per_s"] / rates["png"]["samples_per_s"]
     return delta, rates
+
+
+def loading_floor(getitem: dict, train_runs: dict, batch_size: int) -> dict:
+    """What "loading below the update" asks of LeRobot's reader. With every core loading (the update needs one
+    too), a step's loading stays below its update only if the reader's per-sample floor divided by the cores
+    is below the update's time per sample: ``floor_over_update_with_every_core`` < 1."""
+    floor_ms = 1000 / getitem[ONE_FRAME]["samples_per_s"]
+    update_ms = 1000 * min(r["update_s_per_step"] for r in train_runs.values()) / batch_size
+    cores = os.cpu_count() or 1
+    return {
+        "reader_floor_ms_per_sample": floor_ms,
+        "update_ms_per_sample": update_ms,
+        "cores": cores,
+        "floor_over_update_with_every_core": floor_ms / cores / update_ms,
+    }
 
 
 def measure_decoder(root: Path, calls: int) -> dict:
@@ -196,6 +215,8 @@ def main() -> None:
                     )
                     save()
             save()
+    if "getitem" in record and "lerobot_train" in record:
+        record["loading_floor"] = loading_floor(record["getitem"], record["lerobot_train"], args.batch_size)
     record["complete"] = True
     record["load_average_1_5_15_min_after"] = os.getloadavg()
     print(json.dumps(record, indent=1))

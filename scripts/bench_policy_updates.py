@@ -2,9 +2,9 @@
 
 RGB-D arms at 64 and 100 px, batch 128, timed in one interleaved run (``lerobot_indicator.bench``): the
 paper's encoder, the default ("drq") encoder, each also with float32 convs, "drq" with 3-step targets and the
-inverse-dynamics loss (the setting that learns RGB-D reach), and LeRobot's SAC
-(``gaussian_actor`` + ``SACAlgorithm``) on the same image size and batch, with its convs trained (as ours)
-and frozen (its config default); plus the state-based update (batch 256). For each arm the matmul/conv FLOPs
+inverse-dynamics loss (the setting that learns RGB-D reach), that one also compiled (``compile_model``), and
+LeRobot's SAC (``gaussian_actor`` + ``SACAlgorithm``) on the same image size and batch, with its convs trained
+(as ours) and frozen (its config default); plus the state-based update (batch 256). For each arm the matmul/conv FLOPs
 of one update and their share of the measured peak. ``--dataset-cost`` also times what fetching future frames
 costs in lerobot-train. Writes a JSON record (default ``docs/results/policy_updates.json``).
 
@@ -40,7 +40,15 @@ ENCODERS = {
     "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
     # The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
     "drq_n3_inverse_dynamics": {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0},
+    # The same under --policy.compile_model=true (the same math: its FLOPs are the eager arm's).
+    "drq_n3_inverse_dynamics_compiled": {
+        "image_encoder": "drq",
+        "n_step": 3,
+        "inverse_dynamics": 1.0,
+        "compile_model": True,
+    },
 }
+COMPILED = "_compiled"
 
 
 def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
@@ -143,7 +151,8 @@ def main() -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
     arms = make_arms(args.device, args.sizes, args.batch_size)
-    flops = {name: matmul_conv_flops(step) for name, step in arms.items()}
+    flops = {name: matmul_conv_flops(step) for name, step in arms.items() if COMPILED not in name}
+    flops.update({name: flops[name.replace(COMPILED, "")] for name in arms if COMPILED in name})
     results = interleaved_rates(arms, args.seconds)
     peaks = measure_peaks(device=args.device)
     peak = max(peaks.values())
@@ -159,6 +168,8 @@ def main() -> None:
             "drq_over_paper_fp32": rate["drq"] / rate["paper_fp32"],
             "drq_n3_inverse_dynamics_over_paper": rate["drq_n3_inverse_dynamics"] / rate["paper"],
             "drq_n3_inverse_dynamics_over_drq": rate["drq_n3_inverse_dynamics"] / rate["drq"],
+            "drq_n3_inverse_dynamics_compiled_over_eager": rate["drq_n3_inverse_dynamics_compiled"]
+            / rate["drq_n3_inverse_dynamics"],
             "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
             "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
         }

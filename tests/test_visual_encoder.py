@@ -194,3 +194,16 @@ def test_one_shift_per_transition_is_shared_by_its_observation_next_observation_
     assert torch.equal(shift[:, :b], shift[:, b : 2 * b])
     assert torch.equal(shift[:, 2 * b :], shift[:, :b][:, rest])
     assert len({tuple(c) for c in shift[:, :b].T.tolist()}) > 1  # transitions get different shifts
+
+
+def test_compiled_image_loss_is_one_graph():
+    """Under ``compile_model`` the image loss must trace as one graph: a graph break (such as tracing the CPU
+    flags read that picks the conv precision) splits it into pieces that recompile until Dynamo falls back to
+    eager. ``fullgraph=True`` raises on any break; the eager backend keeps the check to tracing."""
+    policy, batch = policy_and_batch(conv_precision="auto")
+    torch.manual_seed(1)  # the global RNG: Dynamo does not trace a torch.Generator argument
+    eager, _ = policy.forward(batch)
+    policy._loss = torch.compile(policy._loss, backend="eager", fullgraph=True, dynamic=False)
+    torch.manual_seed(1)
+    traced, _ = policy.forward(batch)
+    torch.testing.assert_close(traced, eager)

@@ -224,9 +224,17 @@ def random_shift(frames: list[Tensor], shift: Tensor) -> list[Tensor]:
     return out
 
 
-@functools.cache
+@torch.compiler.assume_constant_result
 def native_bf16(device_type: str) -> bool:
-    """Whether ``device_type`` computes bfloat16 natively: CUDA with bf16, or a CPU with AVX512-BF16 / AMX."""
+    """Whether ``device_type`` computes bfloat16 natively: CUDA with bf16, or a CPU with AVX512-BF16 / AMX.
+
+    A constant to ``torch.compile``: tracing the ``/proc/cpuinfo`` read would break the compiled loss into
+    pieces that recompile until Dynamo gives up on them."""
+    return _native_bf16(device_type)
+
+
+@functools.cache
+def _native_bf16(device_type: str) -> bool:
     if device_type == "cuda":
         return torch.cuda.is_available() and torch.cuda.is_bf16_supported()
     if device_type == "cpu":

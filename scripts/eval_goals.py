@@ -18,12 +18,12 @@ from pathlib import Path
 
 import draccus
 import numpy as np
-import torch
 from lerobot.envs import make_env
 from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
 from lerobot.policies.factory import make_pre_post_processors
 
+from lerobot_indicator.bench.policy_probe import clipped_goal_dims
 from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
@@ -36,20 +36,6 @@ class EvalGoalsConfig:
     policy_path: Path
     episodes: int = 40
     out: Path | None = None
-
-
-def clipped_goal_dims(policy: IndicatorDDPGPolicy, goals: dict[str, np.ndarray]) -> list[list[str]]:
-    """Per episode, ``"<key>[<dim>]"`` for every goal dimension (channel, for images: any of its pixels)
-    whose normalised value the actor's encoder clips."""
-    encoder = policy.actor.encoder
-    out: list[list[str]] = [[] for _ in range(next(iter(goals.values())).shape[0])]
-    for key, goal in goals.items():
-        with torch.no_grad():
-            beyond = encoder.standardize(key, torch.as_tensor(goal)).abs() > encoder.input_clip
-        beyond = beyond.flatten(2).any(-1) if beyond.ndim > 2 else beyond
-        for episode, dims in enumerate(beyond.numpy()):
-            out[episode] += [f"{key}[{d}]" for d in np.flatnonzero(dims)]
-    return out
 
 
 @draccus.wrap()

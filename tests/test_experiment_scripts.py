@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 import lerobot_indicator  # noqa: F401  (registers the gym ids)
+from lerobot_indicator.bench import experiments
+from lerobot_indicator.bench.policy_probe import clipped_goal_dims
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,21 +38,8 @@ def test_start_distance_is_the_eval_goals_distance_at_reset(tmp_path):
     assert record["start_distance_mean"] == np.mean(record["start_distances"])
     assert record["command"].startswith("python ")
 
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        import experiments
-    finally:
-        sys.path.remove(str(ROOT / "scripts"))
     reference = experiments.start_distances(tmp_path, ["reach_state", "rope_state"])
     assert reference == {"reach_state": record["start_distance_mean"]}
-
-
-def _import_script(name: str):
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        return __import__(name)
-    finally:
-        sys.path.remove(str(ROOT / "scripts"))
 
 
 def test_eval_goals_flags_goals_the_encoder_clips():
@@ -82,7 +71,7 @@ def test_eval_goals_flags_goals_the_encoder_clips():
         "observation.state": np.array([[0.0, 0.49, -0.51], [0.1, 0.2, 0.3]], np.float32),
         "observation.images.front": image,
     }
-    flagged = _import_script("eval_goals").clipped_goal_dims(policy, goals)
+    flagged = clipped_goal_dims(policy, goals)
     assert flagged == [["observation.state[2]"], ["observation.images.front[2]"]]
 
 
@@ -132,7 +121,6 @@ def test_eval_goals_on_a_trained_checkpoint(trained_run, tmp_path):
 def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     """Runs of different lengths compare at a shared env-step budget; a metric missing from early rows (added
     mid-run) and the filter's precision in cycles that filtered nothing are NaN, not zeros averaged in."""
-    experiments = _import_script("experiments")
     cfg = experiments.ExperimentConfig(
         tasks=["rope_state"],
         methods=["indicator", "indicator_balance_filter"],

@@ -5,7 +5,9 @@ per axis of the end effector: the final error (signed mean, absolute mean, and i
 coordinate: a policy that ignores the goal's value regresses to the mean, correlation near -1), and, at every
 step of the episode's second half that is more than ``epsilon`` from the goal on that axis, which way the
 actor moves and which way the critic's best action on a {-1, 0, 1}^A grid moves: toward the goal, away, or
-not at all. Ground truth is used to *measure* only.
+not at all. Ground truth is used to *measure* only. Also: how saturated a critic's hidden layers are
+(``critic_saturation``) and which goal inputs the encoder's normalisation clips (``clipped_goal_dims``, for
+``scripts/eval_goals.py``).
 """
 
 from __future__ import annotations
@@ -144,3 +146,17 @@ def env_frames(policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int, s
         {k: torch.cat([f[k] for f in frames]) for k in keys},
         {k: torch.cat([f[goal_key(k)] for f in frames]) for k in keys},
     )
+
+
+def clipped_goal_dims(policy: IndicatorDDPGPolicy, goals: dict[str, np.ndarray]) -> list[list[str]]:
+    """Per episode, ``"<key>[<dim>]"`` for every goal dimension (channel, for images: any of its pixels)
+    whose normalised value the actor's encoder clips."""
+    encoder = policy.actor.encoder
+    out: list[list[str]] = [[] for _ in range(next(iter(goals.values())).shape[0])]
+    for key, goal in goals.items():
+        with torch.no_grad():
+            beyond = encoder.standardize(key, torch.as_tensor(goal)).abs() > encoder.input_clip
+        beyond = beyond.flatten(2).any(-1) if beyond.ndim > 2 else beyond
+        for episode, dims in enumerate(beyond.numpy()):
+            out[episode] += [f"{key}[{d}]" for d in np.flatnonzero(dims)]
+    return out

@@ -1,0 +1,283 @@
+"""The paper's comparison (Figure 3 / supplementary ablations) on our tasks: ``scripts/experiments.py``'s runner.
+
+Runs ``lerobot-indicator-train`` for every (task, method, seed), resumably (a finished run is skipped,
+an interrupted one continues with ``--resume=true``), then aggregates the runs' ``metrics.jsonl`` into
+``<out>/summary.json``, learning-curve plots and a markdown table.
+
+    python scripts/experiments.py --tasks='[reach_state]' --seeds='[0,1,2]' --out=docs/results/experiments \
+        --runs_dir=outputs/experiments/runs
+    python scripts/experiments.py --tasks='[reach_state]' --plot_only=true ...   # aggregate only
+"""
+
+import json
+import os
+import platform
+import shlex
+import subprocess
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import draccus
+import matplotlib
+import numpy as np
+
+from lerobot_indicator.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+BIN = Path(sys.executable).parent
+
+# Panels that only mean something for some methods (default: every method with the series).
+PANEL_METHODS = {
+    "reward_accuracy": [m for m in METHODS if m != "oracle"],
+    "false_negative_rate_kept": [m for m in METHODS if m != "oracle"],
+    "filtered_gt_success_rate": [m for m, args in METHODS.items() if "--policy.filter=true" in args],
+}
+
+
+@dataclass
+class ExperimentConfig:
+    tasks: list[str] = field(default_factory=lambda: ["reach_state"])
+    methods: list[str] = field(default_factory=lambda: list(PAPER_METHODS))
+    seeds: list[int] = field(default_factory=lambda: [0, 1, 2])
+    # Summary, plot and table (small; commit them). Run directories (checkpoints, replay) go to runs_dir.
+    out: Path = Path("outputs/experiments")
+    runs_dir: Path = Path("outputs/experiments/runs")
+    # Overrides of the task presets' budget (None = preset).
+    steps: int | None = None
+    device: str = "cpu"
+    n_envs: int = 2
+    plot_only: bool = False
+    # Extra table rows at these env-step budgets (methods run to different budgets compare at a shared one).
+    table_env_steps: list[int] = field(default_factory=list)
+    extra_args: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        for name, known, values in (("tasks", TASKS, self.tasks), ("methods", METHODS, self.methods)):
+            unknown = [v for v in values if v not in known]
+            if unknown:
+                raise ValueError(f"--{name}: unknown {unknown}; choose from {list(known)}")
+
+
+def run_dir(cfg: ExperimentConfig, task: str, method: str, seed: int) -> Path:
+    return cfg.runs_dir / task / method / f"seed_{seed}"
+
+
+def read_rows(path: Path) -> list[dict]:
+    if not path.exists():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+
+
+def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
+    """Run (or resume) one training run; returns its wall time, 0 if it was already complete."""
+    preset, out = TASKS[task], run_dir(cfg, task, method, seed)
+    steps = cfg.steps or preset.steps
+    rows = read_rows(out / "metrics.jsonl")
+    if rows and rows[-1]["step"] >= steps:
+        return 0.0
+    cmd = [
+        str(BIN / "lerobot-indicator-train"),
+        *preset.env_args,
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        f"--policy.device={cfg.device}",
+        *METHODS[method],
+        f"--steps={steps}",
+        f"--online.n_envs={cfg.n_envs}",
+        f"--online.episodes_per_cycle={preset.episodes_per_cycle}",
+        f"--online.updates_per_cycle={preset.updates_per_cycle}",
+        f"--online.eval_episodes={preset.eval_episodes}",
+        f"--env_eval_freq={preset.env_eval_freq}",
+        f"--save_freq={steps}",
+        f"--seed={seed}",
+        f"--output_dir={out}",
+        *cfg.extra_args,
+    ]
+    if (out / "resume").exists() or (out / "resume.old").exists():
+        cmd.append("--resume=true")
+    print("$ " + shlex.join(cmd), flush=True)
+    t0 = time.perf_counter()
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    subprocess.run(cmd, check=True, env=env)
+    return time.perf_counter() - t0
+
+
+def aggregate(cfg: ExperimentConfig, task: str) -> dict:
+    """Mean and std over seeds of the eval metrics at each evaluation point, per method."""
+    result = {}
+    for method in cfg.methods:
+        runs = [read_rows(run_dir(cfg, task, method, s) / "metrics.jsonl") for s in cfg.seeds]
+        runs = [[r for r in rows if "eval_success_rate" in r] for rows in runs]
+        runs = [r for r in runs if r]
+        if not runs:
+            continue
+        n = min(len(r) for r in runs)
+        series = {}
+        for key in (
+            "eval_success_rate",
+            "eval_final_distance",
+            "reward_accuracy",
+            "false_negative_rate",
+            "false_negative_rate_kept",
+            "frac_filtered",
+            "filtered_gt_success_rate",
+        ):
+            if any(key in row for r in runs for row in r[:n]):
+                # NaN where a row lacks the key (a metric added after the run started); null in the JSON.
+                values = np.array([[_value(row, key) for row in r[:n]] for r in runs], dtype=float)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+                    mean, std = np.nanmean(values, 0), np.nanstd(values, 0)
+                series[key] = {"mean": _nan_to_none(mean), "std": _nan_to_none(std)}
+        final_success = [r[n - 1]["eval_success_rate"] for r in runs]
+        final_distance = [r[n - 1]["eval_final_distance"] for r in runs]
+        result[method] = {
+            "per_seed": {  # at the shared eval points ``env_steps``
+                "eval_success_rate": [[row["eval_success_rate"] for row in r[:n]] for r in runs],
+                "eval_final_distance": [[row["eval_final_distance"] for row in r[:n]] for r in runs],
+            },
+            "env_steps": [row["env_steps"] for row in runs[0][:n]],
+            "series": series,
+            "n_seeds": len(runs),
+            "final_env_steps": runs[0][n - 1]["env_steps"],
+            "final_success_rate": {
+                "mean": float(np.mean(final_success)),
+                "std": float(np.std(final_success)),
+            },
+            "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
+            "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
+        }
+    return result
+
+
+def _value(row: dict, key: str) -> float:
+    """A logged metric, NaN where undefined: missing, or the filter's precision in a cycle that filtered nothing
+    (logged as 0)."""
+    if key == "filtered_gt_success_rate" and not row.get("frac_filtered"):
+        return np.nan
+    return row.get(key, np.nan)
+
+
+def _nan_to_none(values: np.ndarray) -> list[float | None]:
+    return [None if np.isnan(v) else float(v) for v in values]
+
+
+def start_distances(out: Path, tasks: list[str]) -> dict[str, float]:
+    """Per task, the eval goals' distance at reset (``scripts/start_distance.py --out=<out>/start_distance_<task>
+    .json``), if measured: what a policy that never moves scores, drawn as a reference line."""
+    files = {task: out / f"start_distance_{task}.json" for task in tasks}
+    return {t: json.loads(f.read_text())["start_distance_mean"] for t, f in files.items() if f.exists()}
+
+
+def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -> None:
+    """One row per task: success rate, final distance, and the indicator reward's accuracy / FN rate."""
+    panels = (
+        ("eval_success_rate", "success rate"),
+        ("eval_final_distance", "final distance to goal"),
+        ("reward_accuracy", "indicator reward accuracy"),
+        # Among the transitions trained on (after filtering): the rewards the critic is actually given.
+        ("false_negative_rate_kept", "false-negative rate (kept transitions)"),
+        # What filtering discards: the share of it that is a ground-truth success (a true false negative).
+        ("filtered_gt_success_rate", "filter precision P(success | filtered)"),
+    )
+    fig, axes = plt.subplots(
+        len(summary), len(panels), figsize=(5 * len(panels), 3.8 * len(summary) + 0.7), squeeze=False
+    )
+    legend: dict[str, object] = {}  # one legend for the figure: label -> handle
+    for row, (task, methods) in zip(axes, summary.items(), strict=True):
+        for ax, (key, label) in zip(row, panels, strict=True):
+            for method, res in methods.items():
+                if key not in res["series"] or method not in PANEL_METHODS.get(key, METHODS):
+                    continue
+                x = np.array(res["env_steps"])
+                mean, std = (np.array(res["series"][key][s], dtype=float) for s in ("mean", "std"))
+                if np.isnan(mean).all():
+                    continue
+                color, dash = STYLES[method]
+                (line,) = ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
+                ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
+                legend.setdefault(LABELS[method], line)
+            if key == "eval_final_distance" and task in (reference or {}):
+                line = ax.axhline(reference[task], color="grey", ls=":", lw=1.5)
+                legend.setdefault("no movement (start distance)", line)
+            if not ax.lines:
+                why = "nothing was filtered" if key == "filtered_gt_success_rate" else "not logged"
+                ax.text(0.5, 0.5, f"no data: {why}", ha="center", transform=ax.transAxes)
+            ax.set_title(f"{task}: {label}")
+            ax.set_xlabel("environment steps")
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+    ncol = 4
+    fig.legend(legend.values(), legend.keys(), loc="lower center", ncol=ncol, fontsize=9, frameon=False)
+    legend_inches = 0.1 + 0.22 * -(-len(legend) // ncol)
+    fig.tight_layout(rect=(0, legend_inches / fig.get_figheight(), 1, 1))
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+SOLVED = 0.9  # the success rate the table's speed column waits for (mean curve over seeds)
+
+
+def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) -> str:
+    """Success and final distance (mean ± std over seeds) per method at its last evaluation, then at each of
+    ``env_steps`` for the methods that went past it; the last column averages each seed's final distance over
+    the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy), and the first evaluation
+    where the mean success over seeds reached ``SOLVED`` (learning speed, what the reach comparison measures)."""
+    lines = [
+        f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals "
+        f"| first env steps with mean success >= {SOLVED} |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for budget in [None, *(env_steps or [])]:
+        for task, methods in summary.items():
+            for method, res in methods.items():
+                steps = res["env_steps"]
+                if budget is not None and (budget not in steps or budget == steps[-1]):
+                    continue  # not reached, or already the final row
+                i = len(steps) - 1 if budget is None else steps.index(budget)
+                seeds = res["per_seed"]
+                success = [v[i] for v in seeds["eval_success_rate"]]
+                distance = [v[i] for v in seeds["eval_final_distance"]]
+                recent = [np.mean(v[max(0, i - window + 1) : i + 1]) for v in seeds["eval_final_distance"]]
+                mean_success = np.mean(seeds["eval_success_rate"], axis=0)[: i + 1]
+                solved = [x for x, m in zip(steps, mean_success, strict=False) if m >= SOLVED]
+                lines.append(
+                    f"| {task} | {LABELS[method]} | {res['n_seeds']} | {steps[i]} | "
+                    f"{np.mean(success):.2f} ± {np.std(success):.2f} | {np.mean(distance):.3f} ± {np.std(distance):.3f}"
+                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} | {solved[0] if solved else '-'} |"
+                )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    cfg = draccus.parse(ExperimentConfig)
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    wall = {}
+    if not cfg.plot_only:
+        # Seeds innermost-but-interleaved: every method gets seed 0 before any gets seed 1, so a partial
+        # run still compares all methods.
+        for task in cfg.tasks:
+            for seed in cfg.seeds:
+                for method in cfg.methods:
+                    wall[f"{task}/{method}/{seed}"] = launch(cfg, task, method, seed)
+    summary = {task: aggregate(cfg, task) for task in cfg.tasks}
+    meta = {
+        "command": shlex.join([sys.executable, *sys.argv]),
+        "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} CPUs",
+        "device": cfg.device,
+        "launch_wall_s": wall,
+    }
+    previous = cfg.out / "summary.json"
+    if cfg.plot_only and previous.exists():  # keep the command and wall times of the runs themselves
+        old = json.loads(previous.read_text())["meta"]
+        meta = {**old, "replotted_with": meta["command"]}
+    (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
+    plot(summary, cfg.out / "comparison.png", start_distances(cfg.out, cfg.tasks))
+    text = table(summary, cfg.table_env_steps)
+    (cfg.out / "table.md").write_text(text + "\n")
+    print(text)

@@ -16,126 +16,15 @@ import json
 import os
 import shlex
 import sys
-import time
 from pathlib import Path
 
 import torch
 
-from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
+from lerobot_indicator.bench.dataset_loading import bench_dataset
+from lerobot_indicator.bench.peers import COMPILED, ENCODERS, make_arms, matmul_conv_flops, measure_peaks
 from lerobot_indicator.bench.records import cpu_model
-from lerobot_indicator.bench.updates import (
-    STATE_FEATURES,
-    interleaved_rates,
-    make_batch,
-    make_policy,
-    policy_update,
-    rgbd_features,
-)
+from lerobot_indicator.bench.updates import interleaved_rates
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
-
-ENCODERS = {
-    "paper": {"image_encoder": "paper"},
-    "paper_fp32": {"image_encoder": "paper", "conv_precision": "float32"},
-    "drq": {"image_encoder": "drq"},
-    "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
-    # The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
-    "drq_n3_inverse_dynamics": {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0},
-    # The same under --policy.compile_model=true (the same math: its FLOPs are the eager arm's).
-    "drq_n3_inverse_dynamics_compiled": {
-        "image_encoder": "drq",
-        "n_step": 3,
-        "inverse_dynamics": 1.0,
-        "compile_model": True,
-    },
-}
-COMPILED = "_compiled"
-
-
-def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
-    arms = {}
-    for size in sizes:
-        features = rgbd_features(size)
-        for name, config in ENCODERS.items():
-            batch = make_batch(features, batch_size, device, n_step=config.get("n_step", 1))
-            arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config), batch)
-        arms[f"lerobot_sac_{size}px"] = make_sac_update(
-            (4, size, size), batch_size, device, freeze_vision_encoder=False
-        )
-        arms[f"lerobot_sac_frozen_convs_{size}px"] = make_sac_update((4, size, size), batch_size, device)
-    arms["state_b256"] = policy_update(
-        make_policy(STATE_FEATURES, device), make_batch(STATE_FEATURES, 256, device)
-    )
-    return arms
-
-
-def make_rgbd_dataset(root: Path, episodes: int = 4, horizon: int = 25) -> Path:
-    """Random 100x100 RGB-D frames with the conventions' keys (docs/conventions.md), stored as PNG images."""
-    import numpy as np
-    from lerobot.datasets import LeRobotDataset
-
-    rgb = {"dtype": "image", "shape": (100, 100, 3), "names": ["height", "width", "channels"]}
-    depth = {
-        "dtype": "image",
-        "shape": (100, 100, 1),
-        "names": ["height", "width", "channels"],
-        "info": {"is_depth_map": True},
-    }
-    vec = {"dtype": "float32", "shape": (3,), "names": ["x", "y", "z"]}
-    features = {
-        "observation.images.front": rgb,
-        "observation.images.front_depth": depth,
-        "observation.images.goal_front": rgb,
-        "observation.images.goal_front_depth": depth,
-        "observation.state": vec,
-        "action": vec,
-    }
-    ds = LeRobotDataset.create("bench/rgbd", fps=10, features=features, root=root, use_videos=False)
-    rng = np.random.default_rng(0)
-    for _ in range(episodes):
-        goal_rgb = rng.integers(0, 256, (100, 100, 3), dtype=np.uint8)
-        goal_depth = rng.uniform(0.3, 2.0, (100, 100, 1)).astype(np.float32)
-        for _ in range(horizon):
-            ds.add_frame(
-                {
-                    "observation.images.front": rng.integers(0, 256, (100, 100, 3), dtype=np.uint8),
-                    "observation.images.front_depth": rng.uniform(0.3, 2.0, (100, 100, 1)).astype(np.float32),
-                    "observation.images.goal_front": goal_rgb,
-                    "observation.images.goal_front_depth": goal_depth,
-                    "observation.state": rng.normal(size=3).astype(np.float32),
-                    "action": rng.uniform(-1, 1, 3).astype(np.float32),
-                    "task": "reach",
-                }
-            )
-        ds.save_episode()
-    ds.finalize()
-    return root
-
-
-def bench_dataset(seconds: float) -> dict:
-    """Samples/s of LeRobotDataset.__getitem__ for growing observation_delta_indices (4 image keys)."""
-    import tempfile
-
-    from lerobot.datasets import LeRobotDataset
-
-    out = {}
-    with tempfile.TemporaryDirectory() as tmp:
-        root = make_rgbd_dataset(Path(tmp) / "rgbd")
-        for deltas in ([0], [0, 1, 2], [0, 1, 2, 4, 8, 16]):
-            keys = ["observation.images.front", "observation.images.front_depth"]
-            keys += [
-                "observation.images.goal_front",
-                "observation.images.goal_front_depth",
-                "observation.state",
-            ]
-            delta_timestamps = {k: [d / 10 for d in deltas] for k in keys}
-            ds = LeRobotDataset("bench/rgbd", root=root, delta_timestamps=delta_timestamps)
-            n, start = 0, time.perf_counter()
-            while time.perf_counter() - start < seconds:
-                ds[n % len(ds)]
-                n += 1
-            elapsed = time.perf_counter() - start
-            out[str(deltas)] = {"samples_per_s": n / elapsed, "frames_per_sample_per_image_key": len(deltas)}
-    return out
 
 
 def main() -> None:

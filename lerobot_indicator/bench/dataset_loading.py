@@ -10,6 +10,8 @@
 - :func:`decode_call_costs`: what one video key of one sample costs in LeRobot's pyav decoder (a fresh
   container and decoder per call, FFmpeg's default thread count) against the same call with a
   single-threaded decoder, for the policy's delta window and for o_t alone.
+- :func:`bench_dataset`: samples/s of a synthetic 100 px PNG dataset (:func:`make_rgbd_dataset`) for growing
+  delta windows (``scripts/bench_policy_updates.py --dataset-cost``).
 """
 
 from __future__ import annotations
@@ -191,4 +193,71 @@ def decode_call_costs(
         out[key]["lerobot_over_single_threaded.delta_window"] = (
             totals["lerobot_pyav.delta_window_ms"] / totals["single_threaded_decoder.delta_window_ms"]
         )
+    return out
+
+
+def make_rgbd_dataset(root: Path, episodes: int = 4, horizon: int = 25) -> Path:
+    """Random 100x100 RGB-D frames with the conventions' keys (docs/conventions.md), stored as PNG images."""
+    import numpy as np
+
+    rgb = {"dtype": "image", "shape": (100, 100, 3), "names": ["height", "width", "channels"]}
+    depth = {
+        "dtype": "image",
+        "shape": (100, 100, 1),
+        "names": ["height", "width", "channels"],
+        "info": {"is_depth_map": True},
+    }
+    vec = {"dtype": "float32", "shape": (3,), "names": ["x", "y", "z"]}
+    features = {
+        "observation.images.front": rgb,
+        "observation.images.front_depth": depth,
+        "observation.images.goal_front": rgb,
+        "observation.images.goal_front_depth": depth,
+        "observation.state": vec,
+        "action": vec,
+    }
+    ds = LeRobotDataset.create("bench/rgbd", fps=10, features=features, root=root, use_videos=False)
+    rng = np.random.default_rng(0)
+    for _ in range(episodes):
+        goal_rgb = rng.integers(0, 256, (100, 100, 3), dtype=np.uint8)
+        goal_depth = rng.uniform(0.3, 2.0, (100, 100, 1)).astype(np.float32)
+        for _ in range(horizon):
+            ds.add_frame(
+                {
+                    "observation.images.front": rng.integers(0, 256, (100, 100, 3), dtype=np.uint8),
+                    "observation.images.front_depth": rng.uniform(0.3, 2.0, (100, 100, 1)).astype(np.float32),
+                    "observation.images.goal_front": goal_rgb,
+                    "observation.images.goal_front_depth": goal_depth,
+                    "observation.state": rng.normal(size=3).astype(np.float32),
+                    "action": rng.uniform(-1, 1, 3).astype(np.float32),
+                    "task": "reach",
+                }
+            )
+        ds.save_episode()
+    ds.finalize()
+    return root
+
+
+def bench_dataset(seconds: float) -> dict:
+    """Samples/s of LeRobotDataset.__getitem__ for growing observation_delta_indices (4 image keys)."""
+    import tempfile
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        root = make_rgbd_dataset(Path(tmp) / "rgbd")
+        for deltas in ([0], [0, 1, 2], [0, 1, 2, 4, 8, 16]):
+            keys = ["observation.images.front", "observation.images.front_depth"]
+            keys += [
+                "observation.images.goal_front",
+                "observation.images.goal_front_depth",
+                "observation.state",
+            ]
+            delta_timestamps = {k: [d / 10 for d in deltas] for k in keys}
+            ds = LeRobotDataset("bench/rgbd", root=root, delta_timestamps=delta_timestamps)
+            n, start = 0, time.perf_counter()
+            while time.perf_counter() - start < seconds:
+                ds[n % len(ds)]
+                n += 1
+            elapsed = time.perf_counter() - start
+            out[str(deltas)] = {"samples_per_s": n / elapsed, "frames_per_sample_per_image_key": len(deltas)}
     return out

@@ -4,6 +4,7 @@
 single RGB-D image observation, so its update rate can be compared with ours on the same image batch.
 ``matmul_conv_flops`` counts the matmul/conv FLOPs of one update and ``measure_peaks`` measures what
 this machine actually sustains, so both can be expressed as a fraction of the achievable peak.
+``make_arms``: the arms of ``scripts/bench_policy_updates.py``, ours (``ENCODERS``) beside SAC's.
 """
 
 from __future__ import annotations
@@ -19,6 +20,13 @@ from lerobot.rl.algorithms.sac import SACAlgorithm, SACAlgorithmConfig
 from lerobot.utils.constants import ACTION
 from torch.utils.flop_counter import FlopCounterMode
 
+from lerobot_indicator.bench.updates import (
+    STATE_FEATURES,
+    make_batch,
+    make_policy,
+    policy_update,
+    rgbd_features,
+)
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
 
 IMAGE_KEY = "observation.images.front"
@@ -241,3 +249,38 @@ def _count_flops(fn: Callable[[], object]) -> int:
     with counter:
         fn()
     return int(counter.get_total_flops())
+
+
+ENCODERS = {
+    "paper": {"image_encoder": "paper"},
+    "paper_fp32": {"image_encoder": "paper", "conv_precision": "float32"},
+    "drq": {"image_encoder": "drq"},
+    "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
+    # The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
+    "drq_n3_inverse_dynamics": {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0},
+    # The same under --policy.compile_model=true (the same math: its FLOPs are the eager arm's).
+    "drq_n3_inverse_dynamics_compiled": {
+        "image_encoder": "drq",
+        "n_step": 3,
+        "inverse_dynamics": 1.0,
+        "compile_model": True,
+    },
+}
+COMPILED = "_compiled"
+
+
+def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
+    arms = {}
+    for size in sizes:
+        features = rgbd_features(size)
+        for name, config in ENCODERS.items():
+            batch = make_batch(features, batch_size, device, n_step=config.get("n_step", 1))
+            arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config), batch)
+        arms[f"lerobot_sac_{size}px"] = make_sac_update(
+            (4, size, size), batch_size, device, freeze_vision_encoder=False
+        )
+        arms[f"lerobot_sac_frozen_convs_{size}px"] = make_sac_update((4, size, size), batch_size, device)
+    arms["state_b256"] = policy_update(
+        make_policy(STATE_FEATURES, device), make_batch(STATE_FEATURES, 256, device)
+    )
+    return arms

@@ -13,46 +13,17 @@ import argparse
 import json
 import os
 import platform
-import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from lerobot_indicator.bench.env_speed import bench_pushes, call_times_ms
 from lerobot_indicator.envs.rope_cache import generate_cache
 from lerobot_indicator.envs.rope_push import RopePushEnv
 
 COMMAND = "MUJOCO_GL=egl .venv/bin/python scripts/bench_rope_speed.py --out docs/results/rope_env_speed.json"
-
-
-def _ms(fn, n: int) -> dict:
-    times = []
-    for _ in range(n):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return {
-        "mean_ms": statistics.fmean(times),
-        "median_ms": statistics.median(times),
-        "max_ms": max(times),
-        "n": n,
-    }
-
-
-def bench_pushes(env: RopePushEnv, n: int, seed: int) -> dict:
-    rng = np.random.default_rng(seed)
-    env.reset(seed=seed)
-
-    def crossing():
-        if env.sim.push(env.sim.random_push_action(rng)) is False:  # rare: clipped at the region edge
-            env.reset()
-        env.camera_observation()  # the rendering a step returns
-
-    def uniform():
-        env.step(rng.uniform(-1, 1, 4))
-
-    return {"crossing_push": _ms(crossing, n), "uniform_random_action": _ms(uniform, n)}
 
 
 def main() -> None:
@@ -98,9 +69,9 @@ def main() -> None:
             result["push_state_only"] = bench_pushes(state, args.n, seed=1)
             result["push_rgbd"] = bench_pushes(rgbd, args.n, seed=1)
             result["reset"] = {
-                "rgbd_from_cache": _ms(lambda: cached.reset(), args.n),
-                "rgbd_on_the_fly": _ms(lambda: rgbd.reset(), max(3, args.n // 4)),
-                "state_on_the_fly": _ms(lambda: state.reset(), max(3, args.n // 4)),
+                "rgbd_from_cache": call_times_ms(lambda: cached.reset(), args.n),
+                "rgbd_on_the_fly": call_times_ms(lambda: rgbd.reset(), max(3, args.n // 4)),
+                "state_on_the_fly": call_times_ms(lambda: state.reset(), max(3, args.n // 4)),
             }
             rng = np.random.default_rng(2)
 
@@ -115,8 +86,8 @@ def main() -> None:
                     cached.step(cached.sim.random_push_action(rng))
 
             result["episode_3_pushes_rgbd_from_cache"] = {
-                "uniform_random_actions": _ms(episode_random_actions, args.n),
-                "crossing_pushes_worst_case": _ms(episode_crossing_pushes, args.n),
+                "uniform_random_actions": call_times_ms(episode_random_actions, args.n),
+                "crossing_pushes_worst_case": call_times_ms(episode_crossing_pushes, args.n),
                 "goal_ms": 1000.0,
             }
         finally:

@@ -13,6 +13,8 @@ not at all. Ground truth is used to *measure* only. Also: how saturated a critic
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import torch
@@ -26,13 +28,22 @@ from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 from lerobot_indicator.training.rollout import env_batch
 
 
+@contextmanager
+def eval_env(policy: IndicatorDDPGPolicy, env_cfg: EnvConfig) -> Iterator[tuple]:
+    """One env of ``env_cfg`` and its pre-processor for ``policy`` (``(vec_env, env_pre)``), closed on exit."""
+    vec_env = make_env(env_cfg, n_envs=1)[env_cfg.type][0]
+    env_pre, _ = make_env_pre_post_processors(env_cfg, policy.config)
+    try:
+        yield vec_env, env_pre
+    finally:
+        vec_env.close()
+
+
 def stuck_state_probe(
     policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int = 20, epsilon: float = 0.05
 ) -> dict:
     policy.eval()
     keys = policy.config.observation_keys
-    vec_env = make_env(env_cfg, n_envs=1)[env_cfg.type][0]
-    env_pre, _ = make_env_pre_post_processors(env_cfg, policy.config)
     action_dim = policy.config.action_dim
     grid = torch.tensor(list(itertools.product([-1.0, 0.0, 1.0], repeat=action_dim)))
     counts = {
@@ -40,7 +51,7 @@ def stuck_state_probe(
     }
     counts["critic_away"] = np.zeros(action_dim)
     final_error, goals, start_distance = [], [], []
-    try:
+    with eval_env(policy, env_cfg) as (vec_env, env_pre):
         for episode in range(episodes):
             obs, info = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
             start_distance.append(float(np.linalg.norm(info[GT_DESIRED_GOAL][0] - info[GT_ACHIEVED_GOAL][0])))
@@ -72,8 +83,6 @@ def stuck_state_probe(
             info = info.get("final_info", info)
             final_error.append(info[GT_ACHIEVED_GOAL][0] - info[GT_DESIRED_GOAL][0])
             goals.append(info[GT_DESIRED_GOAL][0])
-    finally:
-        vec_env.close()
     final_error, goals = np.array(final_error, dtype=np.float64), np.array(goals, dtype=np.float64)
     states = np.maximum(counts["states"], 1)
     distance = np.linalg.norm(final_error, axis=1)
@@ -129,19 +138,15 @@ def critic_saturation(critic: torch.nn.Module, obs: dict, goal: dict, actions: T
 def env_frames(policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int, steps: int, seed: int = 0):
     """(obs, goal) dicts of ``episodes`` x ``steps`` frames on evaluation goals, under uniform random actions."""
     keys = policy.config.observation_keys
-    vec_env = make_env(env_cfg, n_envs=1)[env_cfg.type][0]
-    env_pre, _ = make_env_pre_post_processors(env_cfg, policy.config)
     rng = np.random.default_rng(seed)
     frames = []
-    try:
+    with eval_env(policy, env_cfg) as (vec_env, env_pre):
         for episode in range(episodes):
             obs, _ = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
             for _ in range(steps):
                 frames.append(env_batch(obs, vec_env, env_pre))
                 action = rng.uniform(-1, 1, (1, policy.config.action_dim)).astype(np.float32)
                 obs, *_ = vec_env.step(action)
-    finally:
-        vec_env.close()
     return (
         {k: torch.cat([f[k] for f in frames]) for k in keys},
         {k: torch.cat([f[goal_key(k)] for f in frames]) for k in keys},

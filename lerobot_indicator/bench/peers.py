@@ -251,20 +251,16 @@ def _count_flops(fn: Callable[[], object]) -> int:
     return int(counter.get_total_flops())
 
 
+# The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
+N3_INVERSE_DYNAMICS = {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0}
 ENCODERS = {
     "paper": {"image_encoder": "paper"},
     "paper_fp32": {"image_encoder": "paper", "conv_precision": "float32"},
     "drq": {"image_encoder": "drq"},
     "drq_fp32": {"image_encoder": "drq", "conv_precision": "float32"},
-    # The setting that learns RGB-D reach (docs/results/README.md): 3-step targets + inverse dynamics.
-    "drq_n3_inverse_dynamics": {"image_encoder": "drq", "n_step": 3, "inverse_dynamics": 1.0},
+    "drq_n3_inverse_dynamics": N3_INVERSE_DYNAMICS,
     # The same under --policy.compile_model=true (the same math: its FLOPs are the eager arm's).
-    "drq_n3_inverse_dynamics_compiled": {
-        "image_encoder": "drq",
-        "n_step": 3,
-        "inverse_dynamics": 1.0,
-        "compile_model": True,
-    },
+    "drq_n3_inverse_dynamics_compiled": {**N3_INVERSE_DYNAMICS, "compile_model": True},
 }
 COMPILED = "_compiled"
 

@@ -65,3 +65,18 @@ def test_single_threaded_decode_arm_decodes_the_frames_lerobot_returns(tmp_path)
     got = np.stack([decoded[min(decoded, key=lambda t, q=q: abs(t - q))] for q in timestamps])
     assert np.array_equal(got.transpose(0, 3, 1, 2), expected.numpy())
     assert [int(x[0, 0, 0]) for x in got] == [40, 60, 80, 120]
+
+
+def test_loading_floor_compares_the_reader_floor_spread_over_every_core_with_the_update(monkeypatch):
+    from lerobot_indicator.bench import offline_throughput
+
+    monkeypatch.setattr(offline_throughput.os, "cpu_count", lambda: 2)
+    getitem = {offline_throughput.ONE_FRAME: {"samples_per_s": 50.0}}  # 20 ms per sample
+    runs = {
+        "a": {"update_s_per_step": 0.256},
+        "b": {"update_s_per_step": 0.128},
+    }  # the faster: 1 ms per sample
+    floor = offline_throughput.loading_floor(getitem, runs, batch_size=128)
+    assert floor["reader_floor_ms_per_sample"] == 20.0
+    assert floor["update_ms_per_sample"] == 1.0
+    assert floor["floor_over_update_with_every_core"] == 10.0  # 20 ms / 2 cores against 1 ms

@@ -7,7 +7,6 @@ saturation of each hidden tanh layer and Q's spread, on frames of evaluation goa
         --out=docs/results/experiments_rgbd/critic_saturation.json
 """
 
-import json
 import shlex
 import sys
 from dataclasses import dataclass
@@ -19,6 +18,7 @@ import torch
 from lerobot.envs.configs import EnvConfig
 
 from lerobot_indicator.bench.policy_probe import critic_saturation, env_frames
+from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
 
@@ -50,9 +50,7 @@ def main(cfg: SaturationConfig) -> None:
             f"{[round(h['saturated_fraction'], 3) for h in r['hidden_layers']]}",
             flush=True,
         )
-    cfg.out.write_text(
-        json.dumps({"command": shlex.join(["python", *sys.argv]), "runs": results}, indent=2) + "\n"
-    )
+    write_json(cfg.out, {"command": shlex.join(["python", *sys.argv]), "runs": results})
 
 
 if __name__ == "__main__":

@@ -6,7 +6,6 @@ toward the goal there (``lerobot_indicator.bench.policy_probe``).
         --out=docs/results/experiments_rgbd/stuck_states.json
 """
 
-import json
 import shlex
 import sys
 from dataclasses import dataclass
@@ -17,6 +16,7 @@ import torch
 from lerobot.envs.configs import EnvConfig
 
 from lerobot_indicator.bench.policy_probe import stuck_state_probe
+from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
 
@@ -45,9 +45,7 @@ def main(cfg: ProbeConfig) -> None:
             f"action stays {[round(x, 2) for x in r['critic_best_stays']]}",
             flush=True,
         )
-    cfg.out.write_text(
-        json.dumps({"command": shlex.join(["python", *sys.argv]), "runs": results}, indent=2) + "\n"
-    )
+    write_json(cfg.out, {"command": shlex.join(["python", *sys.argv]), "runs": results})
 
 
 if __name__ == "__main__":

@@ -104,7 +104,8 @@ def enc_ref(encoder: ObservationEncoder, x: Tensor, shift: Tensor | None, drq: b
     if not drq:
         return torch.tanh(h).flatten(1)
     lin, norm = encoder.trunk[1], encoder.trunk[2]
-    h = torch.relu(h).flatten(1) @ lin.weight.detach().T + lin.bias.detach()
+    # The projection reads the feature maps in (H, W, C) order: their channels-last memory order.
+    h = torch.relu(h).permute(0, 2, 3, 1).flatten(1) @ lin.weight.detach().T + lin.bias.detach()
     return torch.tanh(F.layer_norm(h, (h.shape[1],), norm.weight.detach(), norm.bias.detach()))
 
 

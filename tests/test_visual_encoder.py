@@ -14,6 +14,7 @@ from lerobot_indicator.policy.networks_indicator_ddpg import (
     as_float,
     draw_shifts,
     native_bf16,
+    pack_frames,
     random_shift,
     use_bf16,
 )
@@ -63,25 +64,36 @@ def test_presets_fill_the_conv_fields_and_explicit_values_win():
         make_policy(STATE_FEATURES, inverse_dynamics=1.0)
 
 
-def test_random_shift_is_a_clamped_translation_shared_by_all_keys():
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16, torch.uint8])
+def test_random_shift_is_a_clamped_translation_shared_by_all_channels(dtype):
+    """RGB and depth packed as one frame's channels (``pack_frames``) move together; pixels are gathered as
+    2 int64 words (float32 x 4), 1 int64 word (bfloat16 x 4) or 4 bytes (uint8 x 4), all exact."""
     b, h, w, pad = 64, 9, 11, 2
     ys, xs = torch.meshgrid(torch.arange(h), torch.arange(w), indexing="ij")
     rgb = (ys * w + xs).to(torch.uint8).expand(b, 3, h, w).contiguous()
-    depth = (1000 + ys * w + xs).float().expand(b, 1, h, w).contiguous()
+    depth = (100 + ys * w + xs).float().expand(b, 1, h, w).contiguous()  # exact in every dtype tested
+    packed = pack_frames(
+        [{"rgb": rgb[: b // 2], "d": depth[: b // 2]}, {"rgb": rgb[b // 2 :], "d": depth[b // 2 :]}],
+        ["rgb", "d"],
+        dtype,
+    )
+    assert packed.shape == (b, 4, h, w) and packed.dtype == dtype
+    assert torch.equal(packed[:, :3].float(), rgb.float()) and torch.equal(packed[:, 3:].float(), depth)
     torch.manual_seed(0)
-    out_rgb, out_depth = random_shift([rgb, depth], draw_shifts(b, pad, rgb.device))
-    assert out_rgb.dtype == torch.uint8 and out_rgb.is_contiguous(memory_format=torch.channels_last)
+    out = random_shift(packed, draw_shifts(b, pad, rgb.device))
+    assert out.dtype == dtype and out.is_contiguous(memory_format=torch.channels_last)
     seen = set()
     for i in range(b):
-        # The output's top-left pixel tells the shift; every pixel must be the input at the clamped offset.
-        dy = int(out_depth[i, 0, h // 2, w // 2] - 1000) // w - h // 2
-        dx = int(out_depth[i, 0, h // 2, w // 2] - 1000) % w - w // 2
+        # The centre pixel tells the shift; every pixel must be the input at the clamped offset.
+        centre = int(out[i, 3, h // 2, w // 2]) - 100
+        dy, dx = centre // w - h // 2, centre % w - w // 2
         assert abs(dy) <= pad and abs(dx) <= pad
         rows = (torch.arange(h) + dy).clamp(0, h - 1)
         cols = (torch.arange(w) + dx).clamp(0, w - 1)
         expected = (rows[:, None] * w + cols[None, :]).float()
-        torch.testing.assert_close(out_depth[i, 0], expected + 1000)
-        assert torch.equal(out_rgb[i, 1], expected.to(torch.uint8))  # RGB moved with the depth
+        assert torch.equal(out[i, 3].float(), expected + 100)
+        for c in range(3):
+            assert torch.equal(out[i, c].float(), expected)  # RGB moved with the depth
         seen.add((dy, dx))
     assert len(seen) > 10  # shifts differ between frames
 
@@ -90,9 +102,10 @@ def test_drq_folds_normalisation_into_the_first_conv_for_uint8_and_float_frames(
     policy, batch = policy_and_batch()
     enc = policy.critic.encoder
     obs = {RGB: batch[RGB], DEPTH: batch[DEPTH]}
-    folded = enc.conv_features(obs)
-    as_floats = enc.conv_features({k: as_float(v) for k, v in obs.items()})
+    folded = enc.conv_features([obs])
+    as_floats = enc.conv_features([{k: as_float(v) for k, v in obs.items()}])
     explicit = enc.conv(torch.cat([enc.standardize(k, as_float(v)) for k, v in obs.items()], dim=1))
+    assert folded.is_contiguous(memory_format=torch.channels_last)
     torch.testing.assert_close(folded, explicit, atol=1e-4, rtol=1e-4)
     torch.testing.assert_close(as_floats, explicit, atol=1e-4, rtol=1e-4)
 

@@ -113,11 +113,14 @@ def rows_equal(a: Tensor, b: Tensor) -> Tensor:
     if a.shape != b.shape:
         raise ValueError(f"cannot compare observations of shapes {tuple(a.shape)} and {tuple(b.shape)}")
     dtype = torch.promote_types(a.dtype, b.dtype)  # the same answer in either argument order
-    a, b = a.to(dtype), b.to(dtype)
-    if dtype.is_floating_point:
-        int_type = {2: torch.int16, 4: torch.int32, 8: torch.int64}[a.element_size()]
-        a, b = a.contiguous().view(int_type), b.contiguous().view(int_type)
-    return (a == b).flatten(1).all(dim=1)
+    a, b = a.to(dtype).reshape(a.shape[0], -1), b.to(dtype).reshape(b.shape[0], -1)
+    # Compare each row's bytes in the widest machine words that tile it (a 64x64 RGB row: 1536 int64 words
+    # instead of 12288 uint8 compares); equal words are equal bit patterns.
+    row_bytes = a.shape[1] * a.element_size()
+    word = next(
+        w for w in (torch.int64, torch.int32, torch.int16, torch.uint8) if row_bytes % w.itemsize == 0
+    )
+    return (a.view(word) == b.view(word)).all(dim=1)
 
 
 def indicator_reward(

@@ -22,7 +22,7 @@ import torch
 
 from lerobot_indicator.bench.dataset_loading import bench_dataset
 from lerobot_indicator.bench.peers import COMPILED, ENCODERS, make_arms, matmul_conv_flops, measure_peaks
-from lerobot_indicator.bench.records import cpu_model
+from lerobot_indicator.bench.records import cpu_model, git_commit
 from lerobot_indicator.bench.updates import interleaved_rates
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
 
@@ -65,6 +65,7 @@ def main() -> None:
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()
     record = {
         "command": shlex.join(["python", *sys.argv]),
+        "commit": git_commit(),
         "device": args.device,
         "device_name": device_name,
         "native_bf16": native_bf16(torch.device(args.device).type),

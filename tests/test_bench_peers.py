@@ -1,9 +1,14 @@
-"""``lerobot_indicator.bench.peers``: LeRobot's SAC update really trains, and its FLOP count scales with batch."""
+"""``lerobot_indicator.bench.peers``: LeRobot's SAC update really trains, and its FLOP count scales with batch;
+the update timer and the records' commit."""
+
+import re
 
 import pytest
 import torch
 
 from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
+from lerobot_indicator.bench.records import git_commit
+from lerobot_indicator.bench.updates import interleaved_rates
 
 # The smallest square image LeRobot's DefaultImageEncoder (four unpadded stride-2 convs) accepts is 40x40.
 SHAPE = (4, 40, 40)
@@ -67,3 +72,26 @@ def test_measure_peaks_reports_positive_rates():
     bf16 = {"conv3x3_32ch_bf16_autocast_gflops"} if native_bf16("cpu") else set()
     assert set(peaks) == {"sgemm_256_gflops", "sgemm_1024_gflops", "conv3x3_32ch_gflops", *bf16}
     assert all(v > 0 for v in peaks.values())
+
+
+def test_interleaved_rates_counts_updates_and_page_faults():
+    calls = {"small": 0, "large": 0}
+
+    def small() -> None:
+        calls["small"] += 1
+
+    def large() -> None:
+        calls["large"] += 1
+        # 64 MiB written afresh: at least a page fault per 4 KiB page the first time it is touched.
+        torch.ones(16 * 1024 * 1024)
+
+    rates = interleaved_rates({"small": small, "large": large}, seconds=0.3, rounds=3, warmup=1)
+    assert rates["small"]["updates_per_s"] > rates["large"]["updates_per_s"] > 0
+    assert len(rates["large"]["rounds_updates_per_s"]) == 3
+    assert rates["large"]["minor_faults_per_update"] > rates["small"]["minor_faults_per_update"]
+    assert rates["large"]["system_s_per_update"] >= 0
+
+
+def test_git_commit_names_this_checkout():
+    commit = git_commit()
+    assert commit is not None and re.fullmatch(r"[0-9a-f]{40}\+?", commit)

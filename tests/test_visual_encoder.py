@@ -220,3 +220,12 @@ def test_compiled_image_loss_is_one_graph():
     torch.manual_seed(1)
     traced, _ = policy.forward(batch)
     torch.testing.assert_close(traced, eager)
+
+
+def test_random_shift_lowers_under_inductor():
+    """The machine-word gather is eager-only: Inductor cannot lower a dtype view of gathered words, so a compiled
+    learning core (``compile_model``) must take the plain gather and give the same frames."""
+    torch._dynamo.reset()
+    x = torch.randn(6, 4, 8, 8).to(torch.bfloat16).contiguous(memory_format=torch.channels_last)
+    shift = draw_shifts(6, 2, x.device)
+    assert torch.equal(torch.compile(random_shift, fullgraph=True)(x, shift), random_shift(x, shift))

@@ -252,11 +252,9 @@ def random_shift(x: Tensor, shift: Tensor) -> Tensor:
     cols = (torch.arange(w, device=device) + shift[1, :, None]).clamp_(0, w - 1)  # (b, w)
     pixel = torch.arange(b, device=device)[:, None, None] * (h * w) + rows[:, :, None] * w + cols[:, None, :]
     pixels = x.permute(0, 2, 3, 1).contiguous().view(-1, c)
-    word = next(
-        t
-        for t in (torch.int64, torch.int32, torch.int16, torch.uint8)
-        if (c * x.element_size()) % t.itemsize == 0
-    )
+    # Under torch.compile the gather is generated code, and Inductor cannot lower the dtype view back.
+    words = (torch.int64, torch.int32, torch.int16, torch.uint8) if not torch.compiler.is_compiling() else ()
+    word = next((t for t in words if (c * x.element_size()) % t.itemsize == 0), x.dtype)
     shifted = pixels.view(word).index_select(0, pixel.view(-1)).view(x.dtype)
     return shifted.view(b, h, w, c).permute(0, 3, 1, 2)
 

@@ -16,6 +16,7 @@ from lerobot_indicator.finite import check_batch, check_loss
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
+from lerobot_indicator.policy.cpu_memory import keep_freed_memory
 from lerobot_indicator.policy.learned_reward import LearnedReward
 from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
 
@@ -33,6 +34,8 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         super().__init__(config)
         if config.cpu_threads and torch.device(config.device or "cpu").type == "cpu":
             torch.set_num_threads(config.cpu_threads)
+        if config.keep_freed_memory:
+            keep_freed_memory()
         config.validate_features()
         if dataset_meta is not None and getattr(dataset_meta, "episodes", None) is not None:
             config.set_horizon(dataset_horizon(dataset_meta), source=f"dataset {dataset_meta.repo_id}")

@@ -38,6 +38,7 @@ from lerobot_indicator.bench.offline_throughput import (
     offline_path,
     run,
 )
+from lerobot_indicator.bench.records import git_commit, machine_record
 
 
 def main() -> None:
@@ -64,6 +65,8 @@ def main() -> None:
                 f"--env.camera.width={args.size}"]  # fmt: skip
     record = {
         "command": shlex.join(["python", *sys.argv]),
+        "commit": git_commit(),
+        "machine": machine_record(),
         "complete": False,  # each part is written as soon as it is measured
         "load_average_1_5_15_min_before": os.getloadavg(),
     }

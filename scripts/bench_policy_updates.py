@@ -35,11 +35,16 @@ def main() -> None:
     parser.add_argument("--batch-size", type=int, default=128)
     parser.add_argument("--dataset-cost", action="store_true")
     parser.add_argument("--threads", type=int, default=None, help="torch.set_num_threads (default: torch's)")
+    parser.add_argument(
+        "--return-freed-memory",
+        action="store_true",
+        help="build the policies with keep_freed_memory=false (glibc's default allocator behaviour)",
+    )
     parser.add_argument("--out", type=Path, default=Path("docs/results/policy_updates.json"))
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    arms = make_arms(args.device, args.sizes, args.batch_size)
+    arms = make_arms(args.device, args.sizes, args.batch_size, keep_freed_memory=not args.return_freed_memory)
     flops = {name: matmul_conv_flops(step) for name, step in arms.items() if COMPILED not in name}
     flops.update({name: flops[name.replace(COMPILED, "")] for name in arms if COMPILED in name})
     results = interleaved_rates(arms, args.seconds)
@@ -66,6 +71,7 @@ def main() -> None:
     record = {
         "command": shlex.join(["python", *sys.argv]),
         "commit": git_commit(),
+        "keep_freed_memory": not args.return_freed_memory,
         "device": args.device,
         "device_name": device_name,
         "native_bf16": native_bf16(torch.device(args.device).type),
@@ -90,7 +96,8 @@ def main() -> None:
             print(f"dataset deltas {deltas}: {r['samples_per_s']:.1f} samples/s")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     existing = json.loads(args.out.read_text()) if args.out.exists() else {}
-    existing[f"{device_name}_threads{torch.get_num_threads()}"] = record
+    suffix = "_freed_memory_returned" if args.return_freed_memory else ""
+    existing[f"{device_name}_threads{torch.get_num_threads()}{suffix}"] = record
     args.out.write_text(json.dumps(existing, indent=2) + "\n")
 
 

@@ -265,18 +265,19 @@ ENCODERS = {
 COMPILED = "_compiled"
 
 
-def make_arms(device: str, sizes: list[int], batch_size: int) -> dict:
+def make_arms(device: str, sizes: list[int], batch_size: int, **common: object) -> dict:
+    """Update closures of every arm; ``common``: config fields given to each of our policies."""
     arms = {}
     for size in sizes:
         features = rgbd_features(size)
         for name, config in ENCODERS.items():
             batch = make_batch(features, batch_size, device, n_step=config.get("n_step", 1))
-            arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config), batch)
+            arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config, **common), batch)
         arms[f"lerobot_sac_{size}px"] = make_sac_update(
             (4, size, size), batch_size, device, freeze_vision_encoder=False
         )
         arms[f"lerobot_sac_frozen_convs_{size}px"] = make_sac_update((4, size, size), batch_size, device)
     arms["state_b256"] = policy_update(
-        make_policy(STATE_FEATURES, device), make_batch(STATE_FEATURES, 256, device)
+        make_policy(STATE_FEATURES, device, **common), make_batch(STATE_FEATURES, 256, device)
     )
     return arms

@@ -31,15 +31,15 @@ def cpu_flags() -> set[str]:
 
 
 def git_commit() -> str | None:
-    """The checked-out commit of this repository (a ``+`` suffix when the tree has changes), None outside git:
-    a record names the code it measured."""
+    """The checked-out commit of this repository (a ``+`` suffix when files outside docs/results have changes,
+    where records are written), None outside git: a record names the code it measured."""
     root = Path(__file__).resolve().parents[2]
     try:
         head = subprocess.run(
             ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True
         ).stdout.strip()
         dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", ".", ":!docs/results"],
             cwd=root,
             capture_output=True,
             text=True,

@@ -65,6 +65,7 @@ def main() -> None:
             "drq_n3_inverse_dynamics_compiled_over_eager": rate["drq_n3_inverse_dynamics_compiled"]
             / rate["drq_n3_inverse_dynamics"],
             "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
+            "drq_light_over_paper": rate["drq_light"] / rate["paper"],
             "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
         }
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()

@@ -261,6 +261,9 @@ ENCODERS = {
     "drq_n3_inverse_dynamics": N3_INVERSE_DYNAMICS,
     # The same under --policy.compile_model=true (the same math: its FLOPs are the eager arm's).
     "drq_n3_inverse_dynamics_compiled": {**N3_INVERSE_DYNAMICS, "compile_model": True},
+    # A lighter drq stack: half the first layer's channels, the third conv strided (not a preset: it learns
+    # reach more slowly, docs/results/README.md).
+    "drq_light": {"image_encoder": "drq", "conv_channels": [8, 16, 32, 32], "conv_strides": [2, 2, 2, 1]},
 }
 COMPILED = "_compiled"
 

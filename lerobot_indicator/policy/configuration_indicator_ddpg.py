@@ -182,7 +182,7 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # docs/results/policy_updates.json has both.
     cpu_threads: int | None = 1
     # Keep freed memory in the process for reuse (glibc; policy/cpu_memory.py) instead of page-faulting every
-    # large tensor in afresh: 1.5x faster RGB-D updates with 3-step targets on this project's VMs.
+    # large tensor in afresh: 1.45x faster RGB-D updates with 3-step targets on this project's VMs.
     keep_freed_memory: bool = True
     # Exploration (used by the online trainer only, never by select_action).
     noise_eps: float = 0.2

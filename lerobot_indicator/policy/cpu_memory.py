@@ -18,7 +18,7 @@ def keep_freed_memory() -> bool:
     maps and their gradients), so each is page-faulted in again on every update, one fault per 4 KiB page. On
     virtual machines that hand freed pages back to their host those faults are slow: on this project's 2-core
     VMs they took 0.1 s of system time per RGB-D update at 100 px, and the 3-step + inverse-dynamics update ran
-    1.5x faster with freed memory kept (docs/results/README.md, "Image updates"). The process keeps its peak
+    1.45x faster with freed memory kept (docs/results/README.md, "Update speed"). The process keeps its peak
     heap instead. Returns whether the setting took (False where the C library has no ``mallopt``)."""
     try:
         mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt

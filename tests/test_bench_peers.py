@@ -1,6 +1,7 @@
 """``lerobot_indicator.bench.peers``: LeRobot's SAC update really trains, and its FLOP count scales with batch;
 the update timer and the records' commit."""
 
+import mmap
 import re
 
 import pytest
@@ -82,8 +83,10 @@ def test_interleaved_rates_counts_updates_and_page_faults():
 
     def large() -> None:
         calls["large"] += 1
-        # 64 MiB written afresh: at least a page fault per 4 KiB page the first time it is touched.
-        torch.ones(16 * 1024 * 1024)
+        # 64 MiB of fresh anonymous memory written (bypassing malloc, whose reuse depends on keep_freed_memory):
+        # at least one page fault per page touched.
+        with mmap.mmap(-1, 64 * 1024 * 1024) as fresh:
+            fresh.write(bytes(64 * 1024 * 1024))
 
     rates = interleaved_rates({"small": small, "large": large}, seconds=0.3, rounds=3, warmup=1)
     assert rates["small"]["updates_per_s"] > rates["large"]["updates_per_s"] > 0

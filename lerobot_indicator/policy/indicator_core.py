@@ -32,7 +32,7 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames
+from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, widest_word
 
 # Transition-batch keys (the table above).
 ACTION = "action"
@@ -116,10 +116,7 @@ def rows_equal(a: Tensor, b: Tensor) -> Tensor:
     a, b = a.to(dtype).reshape(a.shape[0], -1), b.to(dtype).reshape(b.shape[0], -1)
     # Compare each row's bytes in the widest machine words that tile it (a 64x64 RGB row: 1536 int64 words
     # instead of 12288 uint8 compares); equal words are equal bit patterns.
-    row_bytes = a.shape[1] * a.element_size()
-    word = next(
-        w for w in (torch.int64, torch.int32, torch.int16, torch.uint8) if row_bytes % w.itemsize == 0
-    )
+    word = widest_word(a.shape[1] * a.element_size())
     return (a.view(word) == b.view(word)).all(dim=1)
 
 

@@ -236,6 +236,12 @@ def pack_frames(parts: list[dict[str, Tensor]], keys: list[str], dtype: torch.dt
     return out.permute(0, 3, 1, 2)
 
 
+def widest_word(nbytes: int) -> torch.dtype:
+    """The widest integer dtype whose size divides ``nbytes``: a run of ``nbytes`` bytes viewed as such words
+    is moved or compared in the fewest operations, bit for bit."""
+    return next(w for w in (torch.int64, torch.int32, torch.int16, torch.uint8) if nbytes % w.itemsize == 0)
+
+
 def random_shift(x: Tensor, shift: Tensor) -> Tensor:
     """Translate frame i (all its channels) by ``shift[:, i]`` pixels, replicating the edges (DrQ's pad +
     crop). Returns a channels-last tensor in ``x``'s dtype.
@@ -253,8 +259,7 @@ def random_shift(x: Tensor, shift: Tensor) -> Tensor:
     pixel = torch.arange(b, device=device)[:, None, None] * (h * w) + rows[:, :, None] * w + cols[:, None, :]
     pixels = x.permute(0, 2, 3, 1).contiguous().view(-1, c)
     # Under torch.compile the gather is generated code, and Inductor cannot lower the dtype view back.
-    words = (torch.int64, torch.int32, torch.int16, torch.uint8) if not torch.compiler.is_compiling() else ()
-    word = next((t for t in words if (c * x.element_size()) % t.itemsize == 0), x.dtype)
+    word = x.dtype if torch.compiler.is_compiling() else widest_word(c * x.element_size())
     shifted = pixels.view(word).index_select(0, pixel.view(-1)).view(x.dtype)
     return shifted.view(b, h, w, c).permute(0, 3, 1, 2)
 

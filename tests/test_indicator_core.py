@@ -4,6 +4,7 @@ import pytest
 import torch
 from lerobot.configs import FeatureType, PolicyFeature
 
+from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import (
     IndicatorDDPGConfig,
@@ -104,6 +105,25 @@ def test_select_goals_takes_each_source():
     assert torch.equal(goals[0], batch[core.NEXT + STATE][0])
     assert torch.equal(goals[1], batch[core.FUTURE + STATE][1])
     assert torch.equal(goals[2], batch[GOAL][2])
+
+
+@pytest.mark.parametrize("dtype, shape", [(torch.uint8, (3, 5, 7)), (torch.float32, (1, 4, 4))])
+def test_select_goals_copies_image_rows_bit_for_bit(dtype, shape):
+    """Frames are selected as machine words (105 bytes: bytes; 64 bytes: int64 words): every row is its
+    source's row, bit patterns (-0.0, NaN payloads) included."""
+    gen = torch.Generator().manual_seed(0)
+    b = 7
+    rows = [torch.randint(0, 256, (b, *shape), generator=gen).to(dtype) for _ in range(3)]
+    if dtype == torch.float32:
+        rows[1][2, 0, 1, 1] = -0.0
+        rows[2][3].view(torch.int32)[0, 0, 0] = 0x7FC00123  # a NaN with a payload
+    key = "observation.images.front"
+    batch = {core.NEXT + key: rows[0], core.FUTURE + key: rows[1], goal_key(key): rows[2]}
+    source = torch.tensor([0, 1, 2, 2, 1, 0, 1])
+    picked = core.select_goals(batch, [key], source)[key]
+    assert picked.dtype == dtype and picked.shape == (b, *shape)
+    for i, s in enumerate(source.tolist()):
+        assert torch.equal(picked[i].view(torch.uint8), rows[s][i].view(torch.uint8))
 
 
 def test_indicator_reward_exact_equality_on_every_key():

@@ -173,11 +173,12 @@ GOAL_IS_NEXT = [
 
 
 @pytest.mark.parametrize("goal_is_next", GOAL_IS_NEXT)
-def test_shared_encoder_features_and_one_conv_pass_over_distinct_frames(monkeypatch, goal_is_next):
+def test_shared_encoder_features_and_conv_passes_over_distinct_frames(monkeypatch, goal_is_next):
     """ "drq": critic = [enc(o_t), enc(g)] with gradients, actor = the same values detached, both targets =
     [enc(o_{t+1}), enc(g)] from the online encoder without gradients, transition = [enc(o_t), enc(o_{t+1})];
-    every frame of transition i shifted by the same shift[:, i]. One conv pass over o_t, o_{t+1} and only the
-    goals that are not o_{t+1}: 2B + #(goals != o_{t+1}) frames."""
+    every frame of transition i shifted by the same shift[:, i]. Each distinct frame is encoded once: o_t, the
+    goals, and the o_{t+1} that are goals in one pass with gradients (2B frames), the other o_{t+1} (which only
+    the targets read) in a second pass without."""
     policy = image_policy()
     obs, nxt = frames(1), frames(2)
     goal, is_next = goals_with_next(nxt, goal_is_next)
@@ -201,7 +202,39 @@ def test_shared_encoder_features_and_one_conv_pass_over_distinct_frames(monkeypa
     assert f.transition.requires_grad
     assert f.target_critic_obs is None  # filter_q="online": no target-critic view of (o_t, g)
     assert differs(f.critic, torch.cat([enc_ref(enc, obs, None), enc_ref(enc, goal, None)], 1))
-    assert online == [2 * B + int((~is_next).sum())] and target == []
+    rest = int((~is_next).sum())
+    assert online == [2 * B] + ([rest] if rest else []) and target == []
+
+
+@pytest.mark.parametrize("goal_is_next", GOAL_IS_NEXT)
+def test_shared_encoder_gradient_reaches_goals_that_are_o_next(monkeypatch, goal_is_next):
+    """The encoder's gradient from a loss on the critic's [enc(o_t), enc(g)] equals the reference encoder's,
+    also where g is o_{t+1} and its encoding comes from o_{t+1}'s rows; o_{t+1} that are not goals add none."""
+    policy = image_policy()
+    obs, nxt = frames(1), frames(2)
+    goal, is_next = goals_with_next(nxt, goal_is_next)
+    shifts = record_shifts(monkeypatch)
+    torch.manual_seed(5)
+    f = encode(policy, obs, nxt, goal, is_next)
+    (shift,) = shifts
+    enc = policy.critic.encoder
+    weight = torch.randn(f.critic.shape, generator=torch.Generator().manual_seed(3))
+    params = [enc.conv[0].weight, enc.conv[0].bias, enc.trunk[1].weight]
+    got = torch.autograd.grad((f.critic * weight).sum(), params)
+
+    def ref_loss() -> Tensor:
+        conv, lin, norm = enc.conv[0], enc.trunk[1], enc.trunk[2]
+
+        def e(x: Tensor) -> Tensor:
+            h = F.conv2d(shifted(x, shift), conv.weight, conv.bias, stride=2)
+            h = torch.relu(h).permute(0, 2, 3, 1).flatten(1) @ lin.weight.T + lin.bias
+            return torch.tanh(F.layer_norm(h, (h.shape[1],), norm.weight, norm.bias))
+
+        return (torch.cat([e(obs), e(goal)], 1) * weight).sum()
+
+    want = torch.autograd.grad(ref_loss(), params)
+    for g, w in zip(got, want, strict=True):
+        close(g, w)
 
 
 def test_every_goal_is_encoded_while_compiling(monkeypatch):
@@ -249,7 +282,7 @@ def test_target_encoder_encodes_the_target_frames_and_the_filter_view(monkeypatc
         close(target_features, torch.cat([t_next, t_g], 1))
         assert not target_features.requires_grad
     assert differs(f.target_critic, torch.cat([e_next, e_g], 1))
-    assert online == [2 * B + rest]
+    assert online == [2 * B, rest]
     if filter_q == "target":
         close(f.target_critic_obs, torch.cat([t_o, t_g], 1))
         assert target == [2 * B + rest]
@@ -272,7 +305,7 @@ def test_filter_on_the_target_critic_without_target_encoder_sees_the_online_feat
     enc = policy.critic.encoder
     close(f.target_critic_obs, torch.cat([enc_ref(enc, obs, shift), enc_ref(enc, goal, shift)], 1))
     assert not f.target_critic_obs.requires_grad
-    assert online == [2 * B + int((~is_next).sum())]
+    assert online == [2 * B, int((~is_next).sum())]
 
 
 def test_transition_pairs_o_t_with_o_next_when_the_target_bootstraps_from_another_frame(monkeypatch):
@@ -292,7 +325,7 @@ def test_transition_pairs_o_t_with_o_next_when_the_target_bootstraps_from_anothe
     close(f.critic, torch.cat([e_o, e_g], 1))
     close(f.target_critic, torch.cat([e_boot, e_g], 1))
     close(f.transition, torch.cat([e_o, e_next], 1))
-    assert online == [3 * B + int((~is_next).sum())]
+    assert online == [3 * B, int((~is_next).sum())]
 
 
 # ---------------------------------------------------------------------- 2. encode_batch, paper encoders
@@ -504,8 +537,9 @@ def test_image_loss_matches_the_reference(monkeypatch, n_step, inverse_dynamics,
     mean_valid (-Q(o, g, pi) + mean_a pi^2); inverse loss = mean_valid mean_a (tanh(g([enc(o_t),
     enc(o_{t+1})])) - a)^2 (o_{t+1}, not the bootstrap frame), total = critic + actor + inverse_dynamics *
     inverse. n = 2 uses goal = o_{t+1} for every row (R+ now, R- at t+2); n = 1 a mix of o_{t+1} and
-    future goals. One conv pass: o_t, the bootstrap frame, o_{t+1} only where the inverse loss needs it beside
-    another bootstrap frame, and the goals that are not the bootstrap frame."""
+    future goals. Each distinct frame encoded once: o_t, o_{t+1} only where the inverse loss needs it beside
+    another bootstrap frame, the goals, and the bootstrap frames that are goals in one pass with gradients; the
+    other bootstrap frames in a second pass without, unless the one-step inverse loss trains through them."""
     policy = image_policy(
         filter=False, n_step=n_step, inverse_dynamics=inverse_dynamics, p_next=p_next, p_future=1.0 - p_next
     )
@@ -562,4 +596,8 @@ def test_image_loss_matches_the_reference(monkeypatch, n_step, inverse_dynamics,
     else:
         assert "inverse_dynamics_loss" not in stats
     close(total, expected_total)
-    assert online == [2 * B + extra + int(not_boot.sum())]
+    rest = int(not_boot.sum())
+    if inverse_dynamics and n_step == 1:
+        assert online == [2 * B + rest]
+    else:
+        assert online == [2 * B + extra] + ([rest] if rest else [])

@@ -201,11 +201,14 @@ def test_one_shift_per_transition_is_shared_by_its_observation_next_observation_
         batch[core.HAS_FUTURE], policy.config, None, torch.Generator().manual_seed(9)
     ).source
     rest = (source != core.SOURCE_NEXT).nonzero().squeeze(1)
-    (shift,) = seen  # one conv pass: [o_t, o_{t+1}, goals that are not o_{t+1}]
-    b = 16
-    assert shift.shape == (2, 2 * b + len(rest)) and shift.abs().max() <= policy.config.augment_pad
-    assert torch.equal(shift[:, :b], shift[:, b : 2 * b])
-    assert torch.equal(shift[:, 2 * b :], shift[:, :b][:, rest])
+    is_goal = (source == core.SOURCE_NEXT).nonzero().squeeze(1)
+    # Pass with gradients: [o_t, the o_{t+1} that are goals, the other goals]; without: the other o_{t+1}.
+    shift, shift_rest = seen
+    b, n = 16, len(is_goal)
+    assert 0 < n < b and shift.shape == (2, 2 * b) and shift.abs().max() <= policy.config.augment_pad
+    assert torch.equal(shift[:, b : b + n], shift[:, :b][:, is_goal])
+    assert torch.equal(shift[:, b + n :], shift[:, :b][:, rest])
+    assert torch.equal(shift_rest, shift[:, :b][:, rest])
     assert len({tuple(c) for c in shift[:, :b].T.tolist()}) > 1  # transitions get different shifts
 
 
@@ -229,3 +232,16 @@ def test_random_shift_lowers_under_inductor():
     x = torch.randn(6, 4, 8, 8).to(torch.bfloat16).contiguous(memory_format=torch.channels_last)
     shift = draw_shifts(6, 2, x.device)
     assert torch.equal(torch.compile(random_shift, fullgraph=True)(x, shift), random_shift(x, shift))
+
+
+@pytest.mark.parametrize("spatial_softmax", [False, True])
+def test_projection_runs_in_the_conv_precision_except_after_spatial_softmax(spatial_softmax):
+    """With bf16 convs the "drq" projection multiplies bf16 maps (float32 features come out); after the spatial
+    softmax the keypoints and everything behind them stay float32."""
+    policy, batch = policy_and_batch(conv_precision="bfloat16", spatial_softmax=spatial_softmax)
+    linear = policy.critic.encoder.trunk[1]
+    seen = []
+    linear.register_forward_hook(lambda _m, inputs, out: seen.append((inputs[0].dtype, out.dtype)))
+    features = policy.critic.encoder({k: batch[k] for k in (RGB, DEPTH)})
+    assert features.dtype == torch.float32
+    assert seen == [(torch.float32, torch.float32)] if spatial_softmax else seen == [(torch.bfloat16,) * 2]

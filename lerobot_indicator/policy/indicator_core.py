@@ -24,6 +24,7 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
 """
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -98,9 +99,18 @@ def relabel_sources(
 
 
 def _pick(source: Tensor, nxt: Tensor, future: Tensor, recorded: Tensor) -> Tensor:
-    shape = (-1,) + (1,) * (nxt.dim() - 1)
-    s = source.view(shape)
-    return torch.where(s == SOURCE_NEXT, nxt, torch.where(s == SOURCE_FUTURE, future, recorded))
+    """Row i of ``nxt``, ``future`` or ``recorded`` as ``source[i]`` says, bit for bit."""
+    rows = [nxt, future, recorded]
+    if torch.compiler.is_compiling() or len({t.dtype for t in rows}) > 1 or nxt.dim() < 2:
+        s = source.view((-1,) + (1,) * (nxt.dim() - 1))
+        return torch.where(s == SOURCE_NEXT, nxt, torch.where(s == SOURCE_FUTURE, future, recorded))
+    # Each row as the widest machine words that tile it: a 100x100 RGB frame is 3750 int64 selects instead of
+    # 30,000 uint8 ones. (Inductor cannot lower the dtype view back, hence the plain path when compiling.)
+    word = widest_word(math.prod(nxt.shape[1:]) * nxt.element_size())
+    nxt_w, future_w, recorded_w = (t.reshape(t.shape[0], -1).view(word) for t in rows)
+    s = source.view(-1, 1)
+    picked = torch.where(s == SOURCE_NEXT, nxt_w, torch.where(s == SOURCE_FUTURE, future_w, recorded_w))
+    return picked.view(nxt.dtype).view(nxt.shape)
 
 
 def select_goals(batch: dict[str, Tensor], keys: list[str], source: Tensor) -> dict[str, Tensor]:
@@ -200,7 +210,8 @@ def encode_batch(
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
     everyone = torch.arange(goal_is_next.shape[0], device=goal_is_next.device)
     rest = (~goal_is_next).nonzero().squeeze(1) if dedupe else everyone
-    goal_rest = {k: v[rest] for k, v in goal.items()} if dedupe else goal
+    # index_select: a row copy, several times faster than advanced indexing on CPU.
+    goal_rest = {k: v.index_select(0, rest) for k, v in goal.items()} if dedupe else goal
     # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
     # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
     # few-pixel displacement an action makes into the shift noise.
@@ -209,12 +220,27 @@ def encode_batch(
     def shifts(*rows: Tensor) -> list[Tensor] | None:
         return None if shift is None else [shift[:, r] for r in rows]
 
-    def encode_with_next(encoder: nn.Module, frames: list[dict[str, Tensor]]) -> list[Tensor]:
+    def encode_with_next(
+        encoder: nn.Module, frames: list[dict[str, Tensor]], next_needs_grad: bool = True
+    ) -> list[Tensor]:
         """Encodings of ``frames`` (the batch's o_t) + [o_{t+1}, g], the goal's sharing o_{t+1}'s where they
-        are one frame."""
-        rows = shifts(*[everyone] * (len(frames) + 1), rest)
-        *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
-        return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
+        are one frame. Without ``next_needs_grad`` (o_{t+1} feeds only the targets, except where it is the
+        goal) the o_{t+1} frames that are not goals are encoded in a second pass without gradients: the
+        backward pass then covers 2B frames instead of 2B + #(goals != o_{t+1})."""
+        if not (dedupe and torch.is_grad_enabled()) or next_needs_grad or rest.numel() == 0:
+            rows = shifts(*[everyone] * (len(frames) + 1), rest)
+            *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
+            return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
+        is_goal = goal_is_next.nonzero().squeeze(1)
+        next_goal = {k: v.index_select(0, is_goal) for k, v in next_obs.items()}
+        rows = shifts(*[everyone] * len(frames), is_goal, rest)
+        *h, h_next_goal, h_rest = encode_frames(encoder, [*frames, next_goal, goal_rest], rows)
+        with torch.no_grad():
+            next_rest = {k: v.index_select(0, rest) for k, v in next_obs.items()}
+            (h_next_rest,) = encode_frames(encoder, [next_rest], shifts(rest))
+        h_goal = h_rest.new_empty(everyone.shape[0], h_rest.shape[1]).index_put((is_goal,), h_next_goal)
+        h_next = h_goal.index_put((rest,), h_next_rest)
+        return [*h, h_next, h_goal.index_put((rest,), h_rest)]
 
     target_obs = config.filter and config.filter_q == "target"
 
@@ -226,7 +252,9 @@ def encode_batch(
 
     if config.shared_encoder:
         extra = [] if transition_next is None else [transition_next]
-        h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra])
+        # o_{t+1} trains the encoder only through the inverse-dynamics loss of a one-step target.
+        next_needs_grad = critic.inverse is not None and transition_next is None
+        h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra], next_needs_grad)
         features = torch.cat([h_obs, h_goal], dim=1)
         target = torch.cat([h_next, h_goal], dim=1).detach()
         target_o = features.detach() if target_obs else None

@@ -79,6 +79,14 @@ VARIANTS["indicator_balance_filter_calibrated"] = [
     "--policy.filter_start=calibrated",
 ]
 METHODS.update(LEARNED_REWARD_METHODS)
+# The learned-reward baselines with the same 3-step targets and inverse-dynamics loss as the arms they are
+# compared with on RGB-D rope push.
+for _m in LEARNED_REWARD_METHODS:
+    VARIANTS[f"{_m}_n3_inverse_dynamics"] = [
+        *METHODS[_m],
+        "--policy.n_step=3",
+        "--policy.inverse_dynamics=1.0",
+    ]
 # Without random-shift augmentation (the paper's networks see the frames as they are).
 for _m in ("oracle", "indicator_balance_filter_inverse_dynamics"):
     VARIANTS[f"{_m}_no_augmentation"] = [*(METHODS | VARIANTS)[_m], "--policy.augment_pad=0"]
@@ -108,6 +116,8 @@ LABELS = {
     "indicator_balance_filter_calibrated": "Indicator+Balance+Filter, filter once Q is calibrated",
     "ae": "AE",
     "vae": "VAE",
+    "ae_n3_inverse_dynamics": "AE, 3-step, inverse dynamics",
+    "vae_n3_inverse_dynamics": "VAE, 3-step, inverse dynamics",
 }
 # Distinct dashes, so methods whose curves coincide (e.g. filtering never fires) stay visible.
 STYLES = {
@@ -135,6 +145,8 @@ STYLES = {
     "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
     "ae": ("black", "-"),
     "vae": ("black", "--"),
+    "ae_n3_inverse_dynamics": ("black", "-"),
+    "vae_n3_inverse_dynamics": ("black", "--"),
 }
 RGBD_KEYS = "--policy.observation_keys=[observation.images.front,observation.images.front_depth]"
 

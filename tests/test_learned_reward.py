@@ -67,6 +67,33 @@ def test_reward_model_reward_uses_the_codes_of_o_next_and_the_goal(reward):
     )
 
 
+def test_n_step_rewards_encode_the_goals_once_and_match_the_one_step_reward():
+    """With 3-step targets the rewards of o_{t+1}, o_{t+2}, o_{t+3} share one encoding of the goals: the
+    reward encoder sees B goals + 3 x B frames (not 3 x 2B), and the loss's o_t batch once."""
+    policy, _ = policy_and_batch("ae", n_step=3, horizon=3)
+    batch = make_batch(rgbd_features(24), 8, n_step=3)
+    seen = []
+    policy.reward_model.encoder.register_forward_hook(lambda _m, i, _o: seen.append(int(i[0].shape[0])))
+    policy.forward(batch)
+    assert sorted(seen) == [8] * 5  # goals, o_{t+1}, o_{t+2}, o_{t+3}, and o_t for the reconstruction loss
+    keys = [RGB, DEPTH]
+    goal = {k: batch[goal_key(k)] for k in keys}
+    next_obs = {k: batch[core.NEXT + k] for k in keys}
+    reward_to_goal = policy.reward_model.reward_to(goal)
+    torch.testing.assert_close(reward_to_goal(next_obs), policy.reward_model.reward(next_obs, goal))
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_reward_model_convs_run_in_the_conv_precision(precision):
+    policy, batch = policy_and_batch("vae", conv_precision=precision)
+    dtypes = []
+    for conv in [m for m in policy.reward_model.modules() if isinstance(m, torch.nn.Conv2d)]:
+        conv.register_forward_hook(lambda _m, _i, out: dtypes.append(out.dtype))
+    loss, _ = policy.reward_model.loss({k: batch[k] for k in (RGB, DEPTH)})
+    assert loss.dtype == torch.float32 and torch.isfinite(loss)
+    assert set(dtypes) == {torch.bfloat16 if precision == "bfloat16" else torch.float32} and len(dtypes) == 8
+
+
 def test_ae_reconstruction_loss_decreases_on_a_fixed_batch():
     policy, _ = policy_and_batch("ae")
     model = policy.reward_model
@@ -101,7 +128,7 @@ def test_vae_loss_is_reconstruction_plus_beta_kl():
 def test_learned_reward_replaces_the_indicator_in_the_td_target(reward, monkeypatch):
     policy, batch = policy_and_batch(reward)
     fixed = torch.linspace(0.0, 1.0, 8) if reward == "ae" else -torch.linspace(0.0, 3.0, 8)
-    monkeypatch.setattr(policy.reward_model, "reward", lambda next_obs, goal: fixed)
+    monkeypatch.setattr(policy.reward_model, "reward_to", lambda goal: lambda frames: fixed)
     # Target critic constant K: the TD target is r + gamma K, clipped to the reward's return range.
     last = policy.target_critic.net[-1]
     torch.nn.init.zeros_(last.weight)
@@ -141,7 +168,7 @@ def test_learned_reward_logs_ranking_and_error_rates_against_ground_truth():
     # Goals recorded for everyone (no relabeling): rows 0-2 are ground-truth successes, rows 3-5 not.
     policy.config.p_future_unbalanced = 0.0
     fixed = torch.tensor([0.95, 0.2, 0.99, 0.97, 0.1, 0.0])
-    policy.reward_model.reward = lambda next_obs, goal: fixed
+    policy.reward_model.reward_to = lambda goal: lambda frames: fixed
     _, stats = policy.forward(batch)
     # positive = reward >= 0.9: rows 0, 2, 3. FN: row 1 of 3 successes; FP: row 3 of 3 failures.
     assert stats["false_negative_rate"] == pytest.approx(1 / 3)
@@ -214,5 +241,8 @@ def test_every_method_arm_has_a_label_a_style_and_valid_policy_flags():
     for name, flags in METHODS.items():
         args = [f.replace("--policy.", "--", 1) for f in flags]
         cfg = draccus.parse(IndicatorDDPGConfig, args=args)
-        expected = "oracle" if name.startswith("oracle") else name if name in ("ae", "vae") else "indicator"
+        learned = name.split("_")[0]
+        expected = (
+            "oracle" if name.startswith("oracle") else learned if learned in ("ae", "vae") else "indicator"
+        )
         assert cfg.reward == expected, name

@@ -352,12 +352,14 @@ def indicator_ddpg_loss(
     goal = select_goals(batch, keys, relabel.source)
     gt_goal = ground_truth_goal(batch, relabel.source)
 
+    learned_reward = reward_model.reward_to(goal) if reward_model is not None else None
+
     def step_reward(frames: dict[str, Tensor], gt_achieved: Tensor | None) -> Tensor:
         """The reward of arriving at ``frames`` with the batch's goals: indicator, learned or oracle."""
         if config.reward == "indicator":
             return indicator_reward(frames, goal, config.positive_reward, config.negative_reward)
-        if reward_model is not None:
-            return reward_model.reward(frames, goal)
+        if learned_reward is not None:
+            return learned_reward(frames)
         if config.reward != "oracle":
             raise ValueError(f"reward={config.reward!r} needs the policy's reward_model")
         if gt_goal is None or gt_achieved is None:

@@ -14,12 +14,14 @@ image keys stacked as channels, each channel standardised (and clipped) with the
 encoders use.
 """
 
+from collections.abc import Callable
+
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import as_float
+from lerobot_indicator.policy.networks_indicator_ddpg import as_float, use_bf16
 
 
 def ae_reward(code: Tensor, goal_code: Tensor) -> Tensor:
@@ -57,6 +59,7 @@ class LearnedReward(nn.Module):
                 f"{config.observation_keys} has no camera key"
             )
         self.variational = config.reward == "vae"
+        self.conv_precision = config.conv_precision
         self.beta = config.vae_beta
         self.input_clip = config.input_clip
         channels = [int(config.input_features[k].shape[0]) for k in self.image_keys]
@@ -112,22 +115,33 @@ class LearnedReward(nn.Module):
         x = (x - self.mean.view(1, -1, 1, 1)) / self.std.view(1, -1, 1, 1)
         return x.clamp(-self.input_clip, self.input_clip)
 
+    def _convs(self, x: Tensor) -> torch.autocast:
+        """The conv layers' precision: the policy's ``conv_precision`` (bf16 where the CPU or GPU computes it
+        natively), with channels-last maps, the layout oneDNN's convolutions and max-pooling are fastest in."""
+        return torch.autocast(
+            x.device.type, torch.bfloat16, enabled=use_bf16(self.conv_precision, x.device.type)
+        )
+
     def encode(self, x: Tensor) -> tuple[Tensor, Tensor | None]:
-        """(code, log-variance) of standardised images; the code is the posterior mean for the VAE."""
-        h = self.to_code(self.encoder(x))
+        """(code, log-variance) of standardised images; the code is the posterior mean for the VAE. The linear
+        map to the code is float32."""
+        with self._convs(x):
+            h = self.encoder(x.contiguous(memory_format=torch.channels_last))
+        h = self.to_code(h.float())
         if not self.variational:
             return h, None
         mean, log_var = h.chunk(2, dim=1)
         return mean, log_var
 
     def decode(self, code: Tensor) -> Tensor:
-        x = self.from_code(code).view(-1, *self.bottleneck)
-        for i, conv in enumerate(self.decoder):
-            x = F.interpolate(x, size=self.sizes[-2 - i], mode="nearest")
-            x = conv(x)
-            if i < len(self.decoder) - 1:
-                x = F.relu(x)
-        return x
+        x = self.from_code(code).view(-1, *self.bottleneck).contiguous(memory_format=torch.channels_last)
+        with self._convs(x):
+            for i, conv in enumerate(self.decoder):
+                x = F.interpolate(x, size=self.sizes[-2 - i], mode="nearest")
+                x = conv(x)
+                if i < len(self.decoder) - 1:
+                    x = F.relu(x)
+        return x.float()
 
     def loss(self, frames: dict[str, Tensor]) -> tuple[Tensor, dict[str, Tensor]]:
         """Reconstruction (+ beta KL for the VAE) averaged over the batch, and its parts for logging."""
@@ -145,8 +159,18 @@ class LearnedReward(nn.Module):
         return recon + self.beta * kl, stats
 
     @torch.no_grad()
+    def reward_to(self, goal: dict[str, Tensor]) -> Callable[[dict[str, Tensor]], Tensor]:
+        """r(., o_g) for the batch's goals, (B,) per call: the goals are encoded once, however many steps of an
+        n-step return ask for a reward."""
+        goal_code, _ = self.encode(self.images(goal))
+
+        @torch.no_grad()
+        def reward(frames: dict[str, Tensor]) -> Tensor:
+            code, _ = self.encode(self.images(frames))
+            return vae_reward(code, goal_code) if self.variational else ae_reward(code, goal_code)
+
+        return reward
+
     def reward(self, next_obs: dict[str, Tensor], goal: dict[str, Tensor]) -> Tensor:
-        """The baseline's reward r(o_{t+1}, o_g), (B,), computed in one encoder pass over both."""
-        codes, _ = self.encode(torch.cat([self.images(next_obs), self.images(goal)]))
-        code, goal_code = codes.chunk(2)
-        return vae_reward(code, goal_code) if self.variational else ae_reward(code, goal_code)
+        """The baseline's reward r(o_{t+1}, o_g), (B,)."""
+        return self.reward_to(goal)(next_obs)

@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 import torch
+import torch.nn.functional as F
 from test_indicator_core import _losses
 
 from lerobot_indicator.bench.updates import STATE_FEATURES, make_batch, make_policy, rgbd_features
@@ -245,3 +246,27 @@ def test_projection_runs_in_the_conv_precision_except_after_spatial_softmax(spat
     features = policy.critic.encoder({k: batch[k] for k in (RGB, DEPTH)})
     assert features.dtype == torch.float32
     assert seen == [(torch.float32, torch.float32)] if spatial_softmax else seen == [(torch.bfloat16,) * 2]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+@pytest.mark.parametrize("input_grad", [False, True])
+def test_conv_relu_matches_the_plain_ops_with_gradients(dtype, input_grad):
+    """The fused CPU conv + ReLU gives relu(conv2d(x)) and the same gradients for x, weight and bias, with
+    about half the outputs negative (so the ReLU's mask matters)."""
+    assert networks._fused_conv_relu_available()  # x86 CPU builds of torch ship oneDNN
+    gen = torch.Generator().manual_seed(0)
+    x0 = torch.randn(5, 4, 13, 11, generator=gen).to(dtype).contiguous(memory_format=torch.channels_last)
+    w0, b0 = torch.randn(6, 4, 3, 3, generator=gen), torch.randn(6, generator=gen)
+    upstream = torch.randn(5, 6, 6, 5, generator=gen)
+    results = []
+    for fn in (networks.conv_relu, lambda x, w, b, s: F.relu(F.conv2d(x, w, b, s))):
+        x = x0.clone().requires_grad_(input_grad)
+        w, b = w0.clone().requires_grad_(), b0.clone().requires_grad_()
+        out = fn(x, w.to(dtype), b.to(dtype), 2)
+        (out.float() * upstream).sum().backward()
+        results.append([out.float(), w.grad, b.grad] + ([x.grad.float()] if input_grad else []))
+    fused, plain = results
+    assert 0.3 < float((plain[0] == 0).float().mean()) < 0.7
+    tol = {"rtol": 2e-2, "atol": 5e-2} if dtype == torch.bfloat16 else {"rtol": 1e-5, "atol": 1e-5}
+    for got, want in zip(fused, plain, strict=True):
+        torch.testing.assert_close(got, want, **tol)

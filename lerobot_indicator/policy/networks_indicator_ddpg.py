@@ -158,8 +158,8 @@ class ObservationEncoder(nn.Module):
         return torch.cat(states, dim=1)
 
     def conv_features(self, parts: list[dict[str, Tensor]], shift: Tensor | None = None) -> Tensor:
-        """Conv feature maps (channels-last, in the conv precision) of the image keys, stacked as channels, of the frames of
-        every part (one batch, their rows in order).
+        """Conv feature maps (channels-last, in the conv precision) of the image keys, stacked as channels, of
+        the frames of every part (one batch, their rows in order).
 
         Frames may arrive as stored (uint8 RGB, uint16 depth: the replay buffer's packing) or as float32. The
         "paper" encoder normalises and clips them as the state keys; "drq" folds the per-channel normalisation
@@ -182,14 +182,18 @@ class ObservationEncoder(nn.Module):
             )
             # channels_last: the layout oneDNN's CPU convolutions are fastest in.
             images = images.contiguous(memory_format=torch.channels_last)
+        if self.fold_normalization:
+            # The frames are already in the conv precision; each layer's weights are cast to it.
+            x = images
+            for i, conv in enumerate(self.conv[::2]):
+                if i == 0:
+                    weight, bias = self._folded_first_conv([parts[0][k].dtype for k in self.image_keys])
+                else:
+                    weight, bias = conv.weight, conv.bias
+                x = conv_relu(x, weight.to(x.dtype), bias.to(x.dtype), conv.stride[0])
+            return x
         with torch.autocast(device, torch.bfloat16, enabled=bf16):
-            first, rest = self.conv[0], self.conv[1:]
-            if self.fold_normalization:
-                weight, bias = self._folded_first_conv([parts[0][k].dtype for k in self.image_keys])
-                x = F.conv2d(images, weight, bias, first.stride)
-            else:
-                x = first(images)
-            return rest(x)
+            return self.conv(images)
 
     def _folded_first_conv(self, dtypes: list[torch.dtype]) -> tuple[Tensor, Tensor]:
         """First conv's weight and bias acting on raw frames: conv(W, (x * u - m) / s) = conv(W u / s, x) -
@@ -205,6 +209,51 @@ class ObservationEncoder(nn.Module):
         scale, offset = torch.cat(scales).view(1, -1, 1, 1), torch.cat(offsets).view(1, -1, 1, 1)
         first: nn.Conv2d = self.conv[0]
         return first.weight * scale, first.bias - (first.weight * offset).sum(dim=(1, 2, 3))
+
+
+def conv_relu(x: Tensor, weight: Tensor, bias: Tensor, stride: int) -> Tensor:
+    """``relu(conv2d(x, weight, bias, stride))`` without padding. On CPU one oneDNN convolution with the ReLU
+    fused into it: its forward writes the maps once instead of writing and re-reading them, and its backward
+    masks the gradient with the saved output in the conv's own layout. Elsewhere, and under ``torch.compile``
+    (which fuses by itself), the plain ops."""
+    if x.device.type != "cpu" or torch.compiler.is_compiling() or not _fused_conv_relu_available():
+        return F.relu(F.conv2d(x, weight, bias, stride))
+    return _FusedConvReLU.apply(x, weight, bias, stride)
+
+
+@functools.cache
+def _fused_conv_relu_available() -> bool:
+    return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_convolution_pointwise")
+
+
+class _FusedConvReLU(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, x: Tensor, weight: Tensor, bias: Tensor, stride: int) -> Tensor:  # type: ignore[override]
+        out = torch.ops.mkldnn._convolution_pointwise(
+            x, weight, bias, [0, 0], [stride, stride], [1, 1], 1, "relu", [], ""
+        )
+        ctx.save_for_backward(x, weight, out)
+        ctx.stride = stride
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None, None]:  # type: ignore[override]
+        x, weight, out = ctx.saved_tensors
+        grad = torch.ops.aten.threshold_backward(grad.contiguous(memory_format=torch.channels_last), out, 0)
+        grad_x, grad_w, grad_b = torch.ops.aten.convolution_backward(
+            grad,
+            x,
+            weight,
+            [weight.shape[0]],
+            [ctx.stride] * 2,
+            [0, 0],
+            [1, 1],
+            False,
+            [0, 0],
+            1,
+            list(ctx.needs_input_grad[:3]),
+        )
+        return grad_x, grad_w, grad_b, None
 
 
 def as_float(x: Tensor) -> Tensor:
@@ -262,19 +311,22 @@ def random_shift(x: Tensor, shift: Tensor) -> Tensor:
     """
     b, c, h, w = x.shape
     device = x.device
-    rows = (torch.arange(h, device=device) + shift[0, :, None]).clamp_(0, h - 1)  # (b, h)
-    cols = (torch.arange(w, device=device) + shift[1, :, None]).clamp_(0, w - 1)  # (b, w)
-    pixel = torch.arange(b, device=device)[:, None, None] * (h * w) + rows[:, :, None] * w + cols[:, None, :]
+    # Pixel indices as int32 where they fit: half the index data to write and read.
+    index_dtype = torch.int32 if b * h * w < 2**31 else torch.int64
+    arange = functools.partial(torch.arange, device=device, dtype=index_dtype)
+    shift = shift.to(index_dtype)
+    rows = (arange(h) + shift[0, :, None]).clamp_(0, h - 1)  # (b, h)
+    cols = (arange(w) + shift[1, :, None]).clamp_(0, w - 1)  # (b, w)
+    row_start = rows * w + (arange(b) * (h * w))[:, None]
+    index = (row_start[:, :, None] + cols[:, None, :]).view(-1)  # one broadcast add over (b, h, w)
     pixels = x.permute(0, 2, 3, 1).contiguous().view(-1, c)
-    index = pixel.view(-1)
     if torch.compiler.is_compiling():
         # The gather is generated code, and Inductor cannot lower the dtype view back.
         return pixels.index_select(0, index).view(b, h, w, c).permute(0, 3, 1, 2)
     words = pixels.view(widest_word(c * x.element_size()))
-    # A 1-d select of whole words is about 3x faster than selecting rows of one word; int32 indices where they
-    # fit move a quarter less index data.
+    # A 1-d select of whole words is about 3x faster than selecting rows of one word.
     words = words.view(-1) if words.shape[1] == 1 else words
-    shifted = words.index_select(0, index.int() if index.numel() < 2**31 else index)
+    shifted = words.index_select(0, index)
     return shifted.view(x.dtype).view(b, h, w, c).permute(0, 3, 1, 2)
 
 

@@ -54,6 +54,23 @@ def test_sac_update_changes_critics_actor_and_temperature(freeze_vision_encoder)
     assert any(not torch.equal(a, b) for a, b in zip(after_critic, _critic_params(step), strict=True))
 
 
+def test_fused_conv_relu_counts_the_flops_of_the_plain_conv():
+    import torch.nn.functional as F
+
+    from lerobot_indicator.policy.networks_indicator_ddpg import conv_relu
+
+    x = torch.randn(3, 4, 17, 17).contiguous(memory_format=torch.channels_last).requires_grad_()
+    w, b = torch.randn(8, 4, 3, 3, requires_grad=True), torch.randn(8, requires_grad=True)
+
+    def step(fn):
+        return lambda: fn(x, w, b, 2).sum().backward()
+
+    plain = matmul_conv_flops(step(lambda *a: F.relu(F.conv2d(*a))))
+    # forward 2 * 3*8*8*8 outputs * 36 MACs, backward twice that (input and weight gradients)
+    assert plain == 3 * 2 * (3 * 8 * 8 * 8) * 36
+    assert matmul_conv_flops(step(conv_relu)) == plain
+
+
 def test_flops_positive_and_linear_in_batch():
     small = matmul_conv_flops(make_sac_update(SHAPE, batch_size=4))
     large = matmul_conv_flops(make_sac_update(SHAPE, batch_size=8))

@@ -18,7 +18,7 @@ from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.policies.gaussian_actor import GaussianActorConfig, GaussianActorPolicy
 from lerobot.rl.algorithms.sac import SACAlgorithm, SACAlgorithmConfig
 from lerobot.utils.constants import ACTION
-from torch.utils.flop_counter import FlopCounterMode
+from torch.utils.flop_counter import FlopCounterMode, conv_flop_count, register_flop_formula
 
 from lerobot_indicator.bench.updates import (
     STATE_FEATURES,
@@ -241,6 +241,15 @@ def measure_peaks(seconds: float = 2.0, device: str = "cpu") -> dict[str, float]
                 conv_bf16, _count_flops(conv_fwd), seconds, dev
             )
     return results
+
+
+if hasattr(torch.ops.mkldnn, "_convolution_pointwise"):
+
+    @register_flop_formula(torch.ops.mkldnn._convolution_pointwise)
+    def _fused_conv_flops(x_shape, w_shape, *_args, out_shape=None, **_kwargs) -> int:
+        """The fused CPU conv + ReLU (``networks_indicator_ddpg.conv_relu``) counts as its convolution; its
+        backward calls ``convolution_backward``, which FlopCounterMode already counts."""
+        return conv_flop_count(x_shape, w_shape, out_shape, transposed=False)
 
 
 def _count_flops(fn: Callable[[], object]) -> int:

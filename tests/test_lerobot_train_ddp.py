@@ -7,6 +7,8 @@ launcher), so the 2-process CPU run goes through torchrun like a GPU one, and le
 ``Accelerator(cpu=True)`` picks gloo."""
 
 import os
+import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +19,27 @@ from test_lerobot_train import REPO_ID, make_tiny_reach_dataset
 from test_online_training import lerobot_eval
 
 BIN = Path(sys.executable).parent
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def run_process_group(cmd: list[str], timeout: float, env: dict) -> tuple[int, str]:
+    """Run ``cmd`` in its own session; on a timeout kill the whole group, so that no rank outlives the test
+    (a leftover rank keeps the rendezvous port and the next launch waits for it forever)."""
+    with subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, start_new_session=True
+    ) as proc:
+        try:
+            log, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            log, _ = proc.communicate()
+            raise AssertionError(f"timed out after {timeout} s:\n{log[-6000:]}") from None
+    return proc.returncode, log
 
 
 def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
@@ -31,6 +54,7 @@ def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
     }
     cmd = [
         str(BIN / "accelerate"), "launch", "--multi_gpu", "--num_processes=2", "--num_machines=1",
+        f"--main_process_port={free_port()}",
         "--mixed_precision=no", "--dynamo_backend=no", str(BIN / "lerobot-train"),
         "--policy.type=indicator_ddpg", f"--dataset.repo_id={REPO_ID}", f"--dataset.root={data}",
         "--policy.push_to_hub=false", "--policy.device=cpu", "--policy.horizon=6",
@@ -38,9 +62,8 @@ def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
         "--num_workers=0", "--log_freq=1", "--save_freq=1", "--steps=3", "--wandb.enable=false",
         f"--output_dir={out}",
     ]  # fmt: skip
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
-    log = proc.stdout + proc.stderr
-    assert proc.returncode == 0, log[-6000:]
+    returncode, log = run_process_group(cmd, timeout=600, env=env)
+    assert returncode == 0, log[-6000:]
     assert "Effective batch size: 4 x 2 = 8" in log, log[-3000:]  # really two processes
     assert "step:3" in log and "critic_loss" in log, log[-3000:]
 

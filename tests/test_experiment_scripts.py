@@ -168,8 +168,10 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     assert len(rows) == 3
     summary["indicator"]["per_seed"]["eval_success_rate"] = [[0.8, 1.0], [1.0, 0.9]]  # mean 0.9 at 100
     assert experiments.table({"rope_state": summary}).splitlines()[2].split("|")[-2].strip() == "100"
-    experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
+    fig = experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0
+    success, distance = fig.axes[0], fig.axes[1]
+    assert success.get_ylim() == (-0.02, 1.02) and distance.get_ylim() != (-0.02, 1.02)
 
 
 def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):

@@ -55,13 +55,14 @@ def test_evicted_chunks_are_deleted_and_a_resumed_buffer_matches(tmp_path):
     buffer = EpisodeReplayBuffer(capacity_transitions=3 * T, horizon=T)  # 3 episodes
     for cycle in range(5):  # 2 episodes per cycle: episodes 0..9, the buffer keeps 7, 8, 9
         _store(run_dir, buffer, progress, _rollouts(2 * cycle, 2))
-    kept = sorted(p.name for p in (tmp_path / REPLAY_DIR).iterdir())
     # cycle 3 holds episodes 6 (evicted) and 7 (kept); cycles 0-2 hold only evicted ones.
-    assert kept == ["cycle_0000003.npz", "cycle_0000004.npz"]
     assert progress.replay_files == [("cycle_0000003.npz", 6), ("cycle_0000004.npz", 8)]
+    assert len(list((tmp_path / REPLAY_DIR).iterdir())) == 5  # deleted only with the next resume state
 
     policy, optimizer = _policy_and_optimizer(0)
     run_dir.save_state(policy, optimizer, progress)
+    kept = sorted(p.name for p in (tmp_path / REPLAY_DIR).iterdir())
+    assert kept == ["cycle_0000003.npz", "cycle_0000004.npz"]
     fresh_policy, fresh_optimizer = _policy_and_optimizer(1)
     resumed = EpisodeReplayBuffer(capacity_transitions=3 * T, horizon=T)
     persistence = RunPersistence(tmp_path)
@@ -78,6 +79,26 @@ def test_evicted_chunks_are_deleted_and_a_resumed_buffer_matches(tmp_path):
     np.testing.assert_array_equal(resumed.gt_desired, buffer.gt_desired)
     torch.testing.assert_close(fresh_policy.state_dict(), policy.state_dict(), rtol=0, atol=0)
     assert fresh_optimizer.state_dict()["state"][0]["step"] == optimizer.state_dict()["state"][0]["step"]
+
+
+def test_a_run_killed_after_a_cycle_evicted_chunks_resumes_from_its_last_state(tmp_path):
+    """Killed after a cycle stored its episodes (evicting the oldest chunk) but before its resume state was
+    saved: every chunk the saved state lists is still on disk, and resuming rebuilds that state's buffer."""
+    run_dir, progress = RunDir(tmp_path), Progress()
+    buffer = EpisodeReplayBuffer(capacity_transitions=3 * T, horizon=T)
+    policy, optimizer = _policy_and_optimizer(0)
+    for cycle in range(3):
+        _store(run_dir, buffer, progress, _rollouts(2 * cycle, 2))
+        run_dir.save_state(policy, optimizer, progress)
+    saved = RunDir(tmp_path).read_progress()
+    expected = (buffer.obs["observation.state"][:].copy(), buffer.total_episodes_added)
+    _store(run_dir, buffer, progress, _rollouts(6, 2))  # evicts cycle 1's chunk; then the process dies
+    assert progress.replay_files[0][0] != saved.replay_files[0][0]
+    resumed = EpisodeReplayBuffer(capacity_transitions=3 * T, horizon=T)
+    _, loaded = RunPersistence(tmp_path).resume(*_policy_and_optimizer(1), resumed, seed_buffer=None)
+    assert loaded == saved
+    np.testing.assert_array_equal(resumed.obs["observation.state"][:], expected[0])
+    assert resumed.total_episodes_added == expected[1]
 
 
 def test_a_crash_between_the_renames_resumes_from_the_previous_state(tmp_path):

@@ -81,6 +81,9 @@ class RunDir:
 
     def __init__(self, out: Path):
         self.out = Path(out)
+        # Chunks whose episodes the buffer has evicted, deleted only once a resume state that no longer lists
+        # them is on disk: the last saved state still needs them until then.
+        self._evicted: list[str] = []
 
     def state_dir(self) -> Path:
         state, old = self.out / RESUME_DIR, self.out / f"{RESUME_DIR}.old"
@@ -105,6 +108,9 @@ class RunDir:
             final.rename(old)
         tmp.rename(final)
         shutil.rmtree(old, ignore_errors=True)
+        for name in self._evicted:
+            (self.out / REPLAY_DIR / name).unlink(missing_ok=True)
+        self._evicted.clear()
 
     def read_progress(self) -> Progress:
         progress = Progress(**json.loads((self.state_dir() / "progress.json").read_text()))
@@ -126,7 +132,8 @@ class RunDir:
     def append_replay(
         self, rollouts: list[Rollouts], buffer: EpisodeReplayBuffer, progress: Progress
     ) -> None:
-        """Persist this cycle's episodes (already in ``buffer``) and delete the chunks it has evicted."""
+        """Persist this cycle's episodes (already in ``buffer``); the chunks it has evicted are deleted by the
+        next ``save_state``."""
         chunk = replay_chunk(rollouts)
         (self.out / REPLAY_DIR).mkdir(exist_ok=True)
         name = f"cycle_{progress.cycle:07d}.npz"
@@ -135,7 +142,7 @@ class RunDir:
         # A chunk is no longer needed once every one of its episodes has been evicted.
         oldest_kept = buffer.total_episodes_added - buffer.capacity
         while len(progress.replay_files) > 1 and progress.replay_files[1][1] <= oldest_kept:
-            (self.out / REPLAY_DIR / progress.replay_files.pop(0)[0]).unlink(missing_ok=True)
+            self._evicted.append(progress.replay_files.pop(0)[0])
 
     def append_metrics(self, record: dict) -> None:
         with open(self.out / METRICS_FILE, "a") as f:

@@ -104,13 +104,18 @@ def _pick(source: Tensor, nxt: Tensor, future: Tensor, recorded: Tensor) -> Tens
     if torch.compiler.is_compiling() or len({t.dtype for t in rows}) > 1 or nxt.dim() < 2:
         s = source.view((-1,) + (1,) * (nxt.dim() - 1))
         return torch.where(s == SOURCE_NEXT, nxt, torch.where(s == SOURCE_FUTURE, future, recorded))
-    # Each row as the widest machine words that tile it: a 100x100 RGB frame is 3750 int64 selects instead of
-    # 30,000 uint8 ones. (Inductor cannot lower the dtype view back, hence the plain path when compiling.)
-    word = widest_word(math.prod(nxt.shape[1:]) * nxt.element_size())
-    nxt_w, future_w, recorded_w = (t.reshape(t.shape[0], -1).view(word) for t in rows)
+    # A 100x100 RGB frame is 3750 int64 selects instead of 30,000 uint8 ones. (Inductor cannot lower the dtype
+    # view back, hence the plain path when compiling.)
+    nxt_w, future_w, recorded_w = (row_words(t) for t in rows)
     s = source.view(-1, 1)
     picked = torch.where(s == SOURCE_NEXT, nxt_w, torch.where(s == SOURCE_FUTURE, future_w, recorded_w))
     return picked.view(nxt.dtype).view(nxt.shape)
+
+
+def row_words(x: Tensor) -> Tensor:
+    """Each row of ``x`` as the widest machine words that tile its bytes, (B, n_words): rows moved or compared
+    as words are moved or compared bit for bit, in the fewest operations."""
+    return x.reshape(x.shape[0], -1).view(widest_word(math.prod(x.shape[1:]) * x.element_size()))
 
 
 def select_goals(batch: dict[str, Tensor], keys: list[str], source: Tensor) -> dict[str, Tensor]:
@@ -123,11 +128,8 @@ def rows_equal(a: Tensor, b: Tensor) -> Tensor:
     if a.shape != b.shape:
         raise ValueError(f"cannot compare observations of shapes {tuple(a.shape)} and {tuple(b.shape)}")
     dtype = torch.promote_types(a.dtype, b.dtype)  # the same answer in either argument order
-    a, b = a.to(dtype).reshape(a.shape[0], -1), b.to(dtype).reshape(b.shape[0], -1)
-    # Compare each row's bytes in the widest machine words that tile it (a 64x64 RGB row: 1536 int64 words
-    # instead of 12288 uint8 compares); equal words are equal bit patterns.
-    word = widest_word(a.shape[1] * a.element_size())
-    return (a.view(word) == b.view(word)).all(dim=1)
+    # A 64x64 RGB row: 1536 int64 compares instead of 12288 uint8 ones; equal words are equal bit patterns.
+    return (row_words(a.to(dtype)) == row_words(b.to(dtype))).all(dim=1)
 
 
 def indicator_reward(

@@ -117,7 +117,8 @@ class LearnedReward(nn.Module):
 
     def _convs(self, x: Tensor) -> torch.autocast:
         """The conv layers' precision: the policy's ``conv_precision`` (bf16 where the CPU or GPU computes it
-        natively), with channels-last maps, the layout oneDNN's convolutions and max-pooling are fastest in."""
+        natively). Callers hand the convs channels-last maps, the layout oneDNN's convs and max-pooling are
+        fastest in."""
         return torch.autocast(
             x.device.type, torch.bfloat16, enabled=use_bf16(self.conv_precision, x.device.type)
         )

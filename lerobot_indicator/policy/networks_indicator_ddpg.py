@@ -94,7 +94,7 @@ class ObservationEncoder(nn.Module):
                 )
                 pooled_dim = 2 * config.spatial_softmax_keypoints
             # "drq"'s linear projection of the flattened maps runs in the convs' precision (bf16 with float32
-            # accumulation where the CPU has it: 3x less time than float32 at 100 px), LayerNorm in float32. The
+            # accumulation where the CPU has it, several times faster than float32), LayerNorm in float32. The
             # spatial softmax's keypoint coordinates stay float32: bf16 would round them to about half a pixel.
             self.project_in_conv_precision = drq and not config.spatial_softmax
             if drq:

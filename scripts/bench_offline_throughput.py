@@ -37,8 +37,11 @@ from lerobot_indicator.bench.offline_throughput import (
     measure_getitem,
     offline_path,
     run,
+    train_run_spec,
 )
 from lerobot_indicator.bench.records import git_commit, machine_record
+from lerobot_indicator.data.video_decoder_threads import set_video_decoder_threads
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
 
 def main() -> None:
@@ -53,7 +56,7 @@ def main() -> None:
         "--runs",
         nargs="+",
         default=["png:0", "video:0", "video:2"],
-        help="lerobot-train runs, storage:num_workers",
+        help="lerobot-train runs, storage:num_workers[:fork|spawn[:decoder_threads|auto]]",
     )
     parser.add_argument("--out", type=Path, required=True)
     # Datasets already recorded with the same settings (--use_videos=false / true); default: record both.
@@ -61,12 +64,16 @@ def main() -> None:
     parser.add_argument("--video_root", type=Path, default=None)
     args = parser.parse_args()
     torch.set_num_threads(1)
+    # The reader parts decode as lerobot-train's fork workers do with the policy's default.
+    decoder_threads = IndicatorDDPGConfig.video_decoder_threads
+    set_video_decoder_threads(decoder_threads)
     env_args = ["--env.type=sawyer_reach", "--env.obs_type=rgbd", f"--env.camera.height={args.size}",
                 f"--env.camera.width={args.size}"]  # fmt: skip
     record = {
         "command": shlex.join(["python", *sys.argv]),
         "commit": git_commit(),
         "machine": machine_record(),
+        "video_decoder_threads_getitem": decoder_threads,
         "complete": False,  # each part is written as soon as it is measured
         "load_average_1_5_15_min_before": os.getloadavg(),
     }
@@ -101,10 +108,9 @@ def main() -> None:
             else:
                 record["lerobot_train"] = {}
                 for spec in args.runs:
-                    name, workers = spec.split(":")
-                    out = Path(tmp) / f"lt_{name}_{workers}"
-                    record["lerobot_train"][f"{name}_workers{workers}"] = lerobot_train(
-                        roots[name], out, args.batch_size, args.steps, int(workers)
+                    storage, workers, extra, name = train_run_spec(spec)
+                    record["lerobot_train"][name] = lerobot_train(
+                        roots[storage], Path(tmp) / f"lt_{name}", args.batch_size, args.steps, workers, extra
                     )
                     save()
             save()

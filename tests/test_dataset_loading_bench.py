@@ -80,3 +80,23 @@ def test_loading_floor_compares_the_reader_floor_spread_over_every_core_with_the
     assert floor["reader_floor_ms_per_sample"] == 20.0
     assert floor["update_ms_per_sample"] == 1.0
     assert floor["floor_over_update_with_every_core"] == 10.0  # 20 ms / 2 cores against 1 ms
+
+
+def test_train_run_spec_turns_start_method_and_decoder_threads_into_lerobot_train_flags():
+    import pytest
+
+    from lerobot_indicator.bench.offline_throughput import train_run_spec
+
+    assert train_run_spec("video:3") == ("video", 3, [], "video_workers3")
+    assert train_run_spec("video:3:fork") == (
+        "video", 3, ["--dataloader_multiprocessing_context=fork"], "video_workers3_fork"
+    )  # fmt: skip
+    assert train_run_spec("png:0:spawn:auto") == (
+        "png",
+        0,
+        ["--dataloader_multiprocessing_context=spawn", "--policy.video_decoder_threads=null"],
+        "png_workers0_spawn_decoder_threads_auto",
+    )
+    for bad in ("video", "mp4:3", "video:x", "video:3:fork:1:2"):
+        with pytest.raises(ValueError, match="expected png\\|video:<workers>"):
+            train_run_spec(bad)

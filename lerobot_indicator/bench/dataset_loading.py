@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from datasets.features import image as hf_image
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.video_utils import decode_video_frames_pyav
 
+from lerobot_indicator.data.video_decoder_threads import ffmpeg_cores, set_video_decoder_threads
 from lerobot_indicator.keys import goal_key
 
 
@@ -167,14 +169,23 @@ def decode_call_costs(
     videos: dict[str, Path], offsets: list[int], fps: int, frames: int, calls: int, rounds: int = 3
 ) -> dict[str, dict[str, float]]:
     """Milliseconds per call, per video key: ``decode_video_frames_pyav`` (what ``lerobot-train`` runs per
-    key per sample) and the single-threaded loop, for ``offsets`` (the policy's delta indices) and for
-    ``[0]``, at start frames spread over the first ``frames - max(offsets)`` frames of one episode's file.
-    Interleaved rounds, so load on the machine hits every arm alike."""
+    key per sample) with FFmpeg's thread choice and with one decoder thread (``video_decoder_threads=1``), and
+    the single-threaded loop, for ``offsets`` (the policy's delta indices) and for ``[0]``, at start frames
+    spread over the first ``frames - max(offsets)`` frames of one episode's file. Interleaved rounds, so load
+    on the machine hits every arm alike. Leaves FFmpeg's thread choice as it found it."""
     starts = [i % max(1, frames - max(offsets)) for i in range(calls)]
+    before = ffmpeg_cores()
+
+    def lerobot_pyav(threads: int | None) -> Callable[[Path, list[float], bool], object]:
+        def call(path: Path, ts: list[float], depth: bool) -> object:
+            set_video_decoder_threads(threads)
+            return decode_video_frames_pyav(path, ts, 1 / (2 * fps), return_uint8=True, is_depth=depth)
+
+        return call
+
     arms = {
-        "lerobot_pyav": lambda path, ts, depth: decode_video_frames_pyav(
-            path, ts, 1 / (2 * fps), return_uint8=True, is_depth=depth
-        ),
+        "lerobot_pyav": lerobot_pyav(None),
+        "lerobot_pyav_one_decoder_thread": lerobot_pyav(1),
         "single_threaded_decoder": decode_single_threaded,
     }
     spent: dict[str, Counter] = {key: Counter() for key in videos}
@@ -187,11 +198,15 @@ def decode_call_costs(
                     for start in starts:
                         fn(path, [(start + k) / fps for k in window], depth)
                     spent[key][f"{arm}.{window_name}_ms"] += time.perf_counter() - t0
+    set_video_decoder_threads(before)  # the same core count: FFmpeg's choice as before
     out = {}
     for key, totals in spent.items():
         out[key] = {name: 1000 * total / (rounds * calls) for name, total in totals.items()}
         out[key]["lerobot_over_single_threaded.delta_window"] = (
             totals["lerobot_pyav.delta_window_ms"] / totals["single_threaded_decoder.delta_window_ms"]
+        )
+        out[key]["lerobot_over_one_decoder_thread.delta_window"] = (
+            totals["lerobot_pyav.delta_window_ms"] / totals["lerobot_pyav_one_decoder_thread.delta_window_ms"]
         )
     return out
 

@@ -37,12 +37,14 @@ def run(cmd: list[str]) -> str:
     return proc.stdout + proc.stderr
 
 
-def lerobot_train(root: Path, out: Path, batch_size: int, steps: int, num_workers: int) -> dict:
+def lerobot_train(
+    root: Path, out: Path, batch_size: int, steps: int, num_workers: int, extra: list[str] | None = None
+) -> dict:
     cmd = [str(BIN / "lerobot-train"), "--policy.type=indicator_ddpg", "--policy.push_to_hub=false",
            "--policy.device=cpu", f"--dataset.repo_id={REPO}", f"--dataset.root={root}",
            "--dataset.video_backend=pyav", f"--batch_size={batch_size}", f"--steps={steps}", "--log_freq=1",
            f"--num_workers={num_workers}", "--save_checkpoint=false", "--wandb.enable=false",
-           f"--output_dir={out}"]  # fmt: skip
+           f"--output_dir={out}", *(extra or [])]  # fmt: skip
     log = run(cmd)
     # The first two steps hold the loader's start (workers, accelerate's one-batch look-ahead).
     data_s = [float(x) for x in re.findall(r"data_s:([0-9.]+)", log)][2:]
@@ -56,6 +58,25 @@ def lerobot_train(root: Path, out: Path, batch_size: int, steps: int, num_worker
         "samples_per_s": batch_size / step_s,
         "loading_share_of_step": sum(data_s) / (sum(data_s) + sum(updt_s)),
     }
+
+
+def train_run_spec(spec: str) -> tuple[str, int, list[str], str]:
+    """``storage:workers[:start_method[:decoder_threads]]`` -> storage, workers, extra ``lerobot-train`` flags,
+    record name. ``start_method``: ``fork`` / ``spawn`` (``--dataloader_multiprocessing_context``; default
+    LeRobot's); ``decoder_threads``: ``--policy.video_decoder_threads`` (``auto`` = FFmpeg's choice)."""
+    parts = spec.split(":")
+    if not 2 <= len(parts) <= 4 or parts[0] not in ("png", "video") or not parts[1].isdigit():
+        raise ValueError(f"run {spec!r}: expected png|video:<workers>[:fork|spawn[:<threads>|auto]]")
+    storage, workers, *rest = parts
+    extra, name = [], f"{storage}_workers{workers}"
+    if rest:
+        extra.append(f"--dataloader_multiprocessing_context={rest[0]}")
+        name += f"_{rest[0]}"
+    if len(rest) == 2:
+        threads = "null" if rest[1] == "auto" else rest[1]
+        extra.append(f"--policy.video_decoder_threads={threads}")
+        name += f"_decoder_threads_{rest[1]}"
+    return storage, int(workers), extra, name
 
 
 def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:

@@ -184,6 +184,12 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # Keep freed memory in the process for reuse (glibc; policy/cpu_memory.py) instead of page-faulting every
     # large tensor in afresh: 1.45x faster RGB-D updates with 3-step targets on this project's VMs.
     keep_freed_memory: bool = True
+    # Threads per video decoder that LeRobot's pyav reader opens in this process and in forked loader workers
+    # (data/video_decoder_threads.py): 1 = single-threaded, None = FFmpeg's choice (one per core + 1). Small
+    # frames give decoder threads nothing to share, and on 2 busy cores every hand-off waits: lerobot-train
+    # with 3 fork workers loads faster with 1 (docs/results/README.md, "Loading RGB-D datasets"). Spawned
+    # workers (lerobot-train's default start method) start from FFmpeg's choice.
+    video_decoder_threads: int | None = 1
     # Exploration (used by the online trainer only, never by select_action).
     noise_eps: float = 0.2
     random_eps: float = 0.3
@@ -239,6 +245,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         if self.critic_output_scale not in CRITIC_OUTPUT_SCALES:
             raise ValueError(
                 f"critic_output_scale must be one of {CRITIC_OUTPUT_SCALES}, got {self.critic_output_scale!r}"
+            )
+        if self.video_decoder_threads is not None and self.video_decoder_threads < 1:
+            raise ValueError(
+                f"video_decoder_threads must be None (FFmpeg's choice) or >= 1, got {self.video_decoder_threads}"
             )
         if not 0 < self.filter_calibration <= 1:
             raise ValueError(f"filter_calibration must be in (0, 1], got {self.filter_calibration}")

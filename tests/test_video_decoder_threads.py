@@ -1,0 +1,99 @@
+"""``video_decoder_threads``: the policy sets how many threads FFmpeg gives each video decoder opened afterwards
+(LeRobot's pyav reader included), forked loader workers inherit it, and the decoded frames stay bit-identical."""
+
+import multiprocessing
+import os
+
+import av
+import numpy as np
+import pytest
+import torch
+from lerobot.datasets.video_utils import decode_video_frames_pyav
+
+from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy
+from lerobot_indicator.data.video_decoder_threads import ffmpeg_cores, set_video_decoder_threads
+from lerobot_indicator.policy.configuration_indicator_ddpg import (
+    IndicatorDDPGConfig,
+    IndicatorDDPGConfigError,
+)
+
+FPS = 20
+
+
+@pytest.fixture(autouse=True)
+def restore_ffmpeg_default():
+    yield
+    set_video_decoder_threads(None)
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> tuple[str, np.ndarray]:
+    """12 random 64x64 RGB frames in HEVC, lossless planar RGB: the recorder's RGB storage (data/storage.py)."""
+    frames = np.random.default_rng(0).integers(0, 256, (12, 64, 64, 3), dtype=np.uint8)
+    path = str(tmp_path_factory.mktemp("video") / "rgb.mp4")
+    with av.open(path, "w") as out:
+        stream = out.add_stream(
+            "hevc", rate=FPS, options={"x265-params": "lossless=1:log-level=none", "g": "2"}
+        )
+        stream.width, stream.height, stream.pix_fmt = 64, 64, "gbrp"
+        for frame in frames:
+            out.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24").reformat(format="gbrp")))
+        out.mux(stream.encode())
+    return path, frames
+
+
+def decoder_threads(path: str) -> int:
+    """Threads FFmpeg gave a decoder opened now, as LeRobot's pyav reader opens one (no thread settings)."""
+    with av.open(path) as container:
+        stream = container.streams.video[0]
+        next(container.decode(stream))
+        return stream.codec_context.thread_count
+
+
+def test_setting_decides_the_threads_of_decoders_opened_afterwards(video):
+    path, _ = video
+    assert set_video_decoder_threads(1)
+    assert ffmpeg_cores() == 1
+    assert decoder_threads(path) == 1
+    set_video_decoder_threads(None)
+    assert ffmpeg_cores() == len(os.sched_getaffinity(0))
+    if ffmpeg_cores() > 1:  # FFmpeg's own choice: one thread per core + 1
+        assert decoder_threads(path) == ffmpeg_cores() + 1
+    set_video_decoder_threads(3)
+    assert decoder_threads(path) == 4
+
+
+def test_frames_are_identical_with_one_thread_and_ffmpegs_choice(video):
+    path, frames = video
+    timestamps = [k / FPS for k in (0, 1, 3, 7, 11)]
+    decoded = {}
+    for threads in (None, 1):
+        set_video_decoder_threads(threads)
+        decoded[threads] = decode_video_frames_pyav(path, timestamps, 1 / (2 * FPS), return_uint8=True)
+    assert torch.equal(decoded[None], decoded[1])
+    expected = torch.from_numpy(frames[[0, 1, 3, 7, 11]]).permute(0, 3, 1, 2)
+    assert torch.equal(decoded[1], expected)  # lossless: the recorded frames, bit for bit
+
+
+def _child_cores(queue) -> None:
+    queue.put(ffmpeg_cores())
+
+
+def test_policy_applies_the_setting_and_forked_workers_inherit_it():
+    make_policy(STATE_FEATURES)  # default video_decoder_threads=1
+    assert ffmpeg_cores() == 1
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    worker = ctx.Process(target=_child_cores, args=(queue,))
+    worker.start()
+    assert queue.get(timeout=60) == 1
+    worker.join(timeout=60)
+    make_policy(STATE_FEATURES, video_decoder_threads=None)  # FFmpeg's choice again
+    assert ffmpeg_cores() == len(os.sched_getaffinity(0))
+
+
+def test_a_bad_thread_count_names_the_field():
+    with pytest.raises(IndicatorDDPGConfigError, match="video_decoder_threads must be None .* got 0"):
+        IndicatorDDPGConfig(video_decoder_threads=0)
+    with pytest.raises(ValueError, match="video_decoder_threads must be None or >= 0, got -1"):
+        set_video_decoder_threads(-1)

@@ -82,7 +82,9 @@ def test_train_checkpoint_resume_and_load(trained_run: Path):
     # Ground-truth keys are dropped from the inputs; only the compared key and its goal remain.
     assert sorted(cfg["input_features"]) == ["observation.goal_state", "observation.state"]
 
-    resume = [f"--config_path={ckpt / 'train_config.json'}", "--resume=true", "--steps=4"]
+    # Resumed with a forked loader worker, the start method the README's RGB-D command uses.
+    resume = [f"--config_path={ckpt / 'train_config.json'}", "--resume=true", "--steps=4", "--num_workers=1",
+              "--dataloader_multiprocessing_context=fork"]  # fmt: skip
     proc = lerobot_train(resume)
     assert "Resuming data order" in proc.stdout + proc.stderr
     assert (out / "checkpoints" / "000004" / "pretrained_model" / "model.safetensors").is_file()

@@ -126,6 +126,47 @@ def test_select_goals_copies_image_rows_bit_for_bit(dtype, shape):
         assert torch.equal(picked[i].view(torch.uint8), rows[s][i].view(torch.uint8))
 
 
+@pytest.mark.parametrize("path", ["words", "words, 2-d rows", "compiling", "1-d rows", "two dtypes"])
+def test_pick_takes_each_source_on_the_word_path_and_the_plain_one(path, monkeypatch):
+    """Rows of one dtype with 2+ dims are selected as machine words; under torch.compile (Inductor cannot
+    lower the word view), for 1-d rows and for rows of different dtypes the plain ``where`` selects them.
+    Both give row i of next / future / recorded as source[i] says."""
+    b = 6
+    shape = {"1-d rows": (b,), "words, 2-d rows": (b, 4)}.get(path, (b, 2, 3))
+    value = torch.arange(b).view((b,) + (1,) * (len(shape) - 1)).expand(shape)
+    nxt, future, recorded = (value + offset for offset in (10, 100, 200))
+    dtypes = (torch.float32, torch.float32, torch.float64) if path == "two dtypes" else (torch.uint8,) * 3
+    nxt, future, recorded = (t.to(dtype) for t, dtype in zip((nxt, future, recorded), dtypes, strict=True))
+    words = []
+    if path.startswith("words"):
+        monkeypatch.setattr(core, "row_words", lambda x, f=core.row_words: words.append(x) or f(x))
+    else:  # the plain path never views rows as words
+        monkeypatch.setattr(
+            core, "row_words", lambda x: pytest.fail("rows viewed as words off the word path")
+        )
+    if path == "compiling":
+        monkeypatch.setattr(torch.compiler, "is_compiling", lambda: True)
+    source = torch.tensor([0, 1, 2, 2, 1, 0])
+    picked = core._pick(source, nxt, future, recorded)
+    assert len(words) == (3 if path.startswith("words") else 0)
+    assert picked.shape == shape and picked.dtype == torch.promote_types(dtypes[0], dtypes[2])
+    expected = [10, 101, 202, 203, 104, 15]
+    assert [int(x) for x in picked.reshape(b, -1)[:, -1]] == expected
+    assert torch.equal(
+        picked, picked.reshape(b, -1)[:, :1].reshape((b,) + (1,) * (len(shape) - 1)).expand(shape)
+    )
+
+
+def test_row_words_are_the_widest_words_that_tile_a_whole_row():
+    """A row of 2x3 bytes is 3 int16 words (not the 3-byte width of its last dims); 12 float32 bytes: 3 int32."""
+    words = core.row_words(torch.zeros(2, 2, 3, dtype=torch.uint8))
+    assert words.dtype == torch.int16 and words.shape == (2, 3)
+    words = core.row_words(torch.zeros(2, 3, dtype=torch.float32))
+    assert words.dtype == torch.int32 and words.shape == (2, 3)
+    words = core.row_words(torch.zeros(4, 2, 4, 4, dtype=torch.uint8))
+    assert words.dtype == torch.int64 and words.shape == (4, 4)
+
+
 def test_indicator_reward_exact_equality_on_every_key():
     img = torch.randint(0, 256, (4, 3, 8, 8)).float() / 255
     depth = torch.rand(4, 1, 8, 8) * 1000

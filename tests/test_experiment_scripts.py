@@ -168,6 +168,21 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     assert len(rows) == 3
     summary["indicator"]["per_seed"]["eval_success_rate"] = [[0.8, 1.0], [1.0, 0.9]]  # mean 0.9 at 100
     assert experiments.table({"rope_state": summary}).splitlines()[2].split("|")[-2].strip() == "100"
+    # A committed summary's method joins where no runs of it are here; a method with runs here keeps them.
+    other = tmp_path / "other_summary.json"
+    elsewhere = {"final_env_steps": 900, "marker": "elsewhere"}
+    other.write_text(json.dumps({"tasks": {"rope_state": {"oracle": elsewhere, "indicator": elsewhere},
+                                           "reach_state": {"oracle": elsewhere}}}))  # fmt: skip
+    merged = {"rope_state": dict(summary)}
+    added = experiments.include_summaries(
+        merged, [other], ["oracle", "indicator", "indicator_balance_filter"]
+    )
+    assert added == {str(other): ["rope_state/oracle"]}
+    assert (
+        merged["rope_state"]["oracle"] == elsewhere
+        and merged["rope_state"]["indicator"]["final_env_steps"] == 200
+    )
+    assert experiments.include_summaries({"rope_state": {}}, [other], ["indicator_balance_filter"]) == {}
     fig = experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0
     success, distance = fig.axes[0], fig.axes[1]

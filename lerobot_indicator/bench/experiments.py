@@ -55,6 +55,9 @@ class ExperimentConfig:
     # Extra table rows at these env-step budgets (methods run to different budgets compare at a shared one).
     table_env_steps: list[int] = field(default_factory=list)
     extra_args: list[str] = field(default_factory=list)
+    # Committed summary.json files whose methods (of --methods, for --tasks) join the summary, plot and table
+    # where runs_dir has no runs of them: runs made on another machine, whose run directories are not here.
+    include_summaries: list[Path] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         for name, known, values in (("tasks", TASKS, self.tasks), ("methods", METHODS, self.methods)):
@@ -153,6 +156,21 @@ def aggregate(cfg: ExperimentConfig, task: str) -> dict:
             "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
         }
     return result
+
+
+def include_summaries(summary: dict, paths: list[Path], methods: list[str]) -> dict[str, list[str]]:
+    """Add to ``summary`` (task -> method -> aggregate) the ``methods`` that the summary.json files at ``paths``
+    hold and ``summary`` lacks; a method aggregated from runs here is kept. Returns what came from where."""
+    added: dict[str, list[str]] = {}
+    for path in paths:
+        for task, results in json.loads(Path(path).read_text())["tasks"].items():
+            if task not in summary:
+                continue
+            for method, res in results.items():
+                if method in methods and method not in summary[task]:
+                    summary[task][method] = res
+                    added.setdefault(str(path), []).append(f"{task}/{method}")
+    return added
 
 
 def _value(row: dict, key: str) -> float:
@@ -271,6 +289,7 @@ def main() -> None:
                 for method in cfg.methods:
                     wall[f"{task}/{method}/{seed}"] = launch(cfg, task, method, seed)
     summary = {task: aggregate(cfg, task) for task in cfg.tasks}
+    included = include_summaries(summary, cfg.include_summaries, cfg.methods)
     meta = {
         "command": shlex.join([sys.executable, *sys.argv]),
         "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} CPUs",
@@ -281,6 +300,8 @@ def main() -> None:
     if cfg.plot_only and previous.exists():  # keep the command and wall times of the runs themselves
         old = json.loads(previous.read_text())["meta"]
         meta = {**old, "replotted_with": meta["command"]}
+    if included:
+        meta["included_from_summaries"] = included
     (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
     plot(summary, cfg.out / "comparison.png", start_distances(cfg.out, cfg.tasks))
     text = table(summary, cfg.table_env_steps)

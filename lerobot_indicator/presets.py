@@ -59,6 +59,13 @@ VARIANTS["indicator_balance_filter_inverse_dynamics"] = [
 ]
 for _m in ("oracle", "indicator", "indicator_balance_filter"):
     VARIANTS[f"{_m}_n3_inverse_dynamics"] = [*VARIANTS[f"{_m}_n3"], "--policy.inverse_dynamics=1.0"]
+# Balancing and filtering alone, with the same options as the RGB-D rope push comparison.
+for _m in ("indicator_balance", "indicator_filter"):
+    VARIANTS[f"{_m}_n3_inverse_dynamics"] = [
+        *METHODS[_m],
+        "--policy.n_step=3",
+        "--policy.inverse_dynamics=1.0",
+    ]
 # The critic's MLP predicting (1-gamma) Q (docs/policy.md): an Oracle seed whose critic saturated learns with it.
 VARIANTS["oracle_n3_inverse_dynamics_return_scale"] = [
     *VARIANTS["oracle_n3_inverse_dynamics"],
@@ -108,6 +115,8 @@ LABELS = {
     "indicator_balance_filter_n3_inverse_dynamics": "Indicator+Balance+Filter, 3-step, inverse dynamics",
     "oracle_n3_inverse_dynamics": "Oracle, 3-step, inverse dynamics",
     "indicator_n3_inverse_dynamics": "Indicator, 3-step, inverse dynamics",
+    "indicator_balance_n3_inverse_dynamics": "Indicator+Balance, 3-step, inverse dynamics",
+    "indicator_filter_n3_inverse_dynamics": "Indicator+Filter, 3-step, inverse dynamics",
     "oracle_n3_inverse_dynamics_return_scale": "Oracle, 3-step, inverse dynamics, critic output x T",
     "indicator_balance_filter_paper_encoder_n3": "Indicator+Balance+Filter, paper encoder, 3-step",
     "oracle_no_augmentation": "Oracle, no augmentation",
@@ -137,6 +146,8 @@ STYLES = {
     "indicator_balance_filter_n3_inverse_dynamics": ("tab:red", "-"),
     "oracle_n3_inverse_dynamics": ("navy", "-"),
     "indicator_n3_inverse_dynamics": ("darkorange", "-"),
+    "indicator_balance_n3_inverse_dynamics": ("tab:green", "-"),
+    "indicator_filter_n3_inverse_dynamics": ("tab:pink", "-"),
     "oracle_n3_inverse_dynamics_return_scale": ("navy", "--"),
     "indicator_balance_filter_paper_encoder_n3": ("dimgray", "-"),
     "oracle_no_augmentation": ("tab:blue", ":"),

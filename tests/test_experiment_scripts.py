@@ -168,25 +168,60 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     assert len(rows) == 3
     summary["indicator"]["per_seed"]["eval_success_rate"] = [[0.8, 1.0], [1.0, 0.9]]  # mean 0.9 at 100
     assert experiments.table({"rope_state": summary}).splitlines()[2].split("|")[-2].strip() == "100"
-    # A committed summary's method joins where no runs of it are here; a method with runs here keeps them.
-    other = tmp_path / "other_summary.json"
-    elsewhere = {"final_env_steps": 900, "marker": "elsewhere"}
-    other.write_text(json.dumps({"tasks": {"rope_state": {"oracle": elsewhere, "indicator": elsewhere},
-                                           "reach_state": {"oracle": elsewhere}}}))  # fmt: skip
-    merged = {"rope_state": dict(summary)}
-    added = experiments.include_summaries(
-        merged, [other], ["oracle", "indicator", "indicator_balance_filter"]
-    )
-    assert added == {str(other): ["rope_state/oracle"]}
-    assert (
-        merged["rope_state"]["oracle"] == elsewhere
-        and merged["rope_state"]["indicator"]["final_env_steps"] == 200
-    )
-    assert experiments.include_summaries({"rope_state": {}}, [other], ["indicator_balance_filter"]) == {}
     fig = experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0
     success, distance = fig.axes[0], fig.axes[1]
     assert success.get_ylim() == (-0.02, 1.02) and distance.get_ylim() != (-0.02, 1.02)
+
+
+def _eval_rows(distances: list[float], filtered: float = 0.0) -> list[dict]:
+    return [
+        {"env_steps": 100 * (i + 1), "eval_success_rate": float(d < 0.35), "eval_final_distance": d,
+         "frac_filtered": filtered, "filtered_gt_success_rate": 0.5, "wall_time_s": 10.0 * (i + 1)}
+        for i, d in enumerate(distances)
+    ]  # fmt: skip
+
+
+def test_included_summaries_merge_seed_by_seed(tmp_path):
+    """Seeds of a committed summary join the runs here seed by seed: a seed run here is kept, a missing seed
+    is added, seeds not asked for are left out, and the merged aggregate is the one of all the seeds' rows."""
+    here = {0: _eval_rows([0.6, 0.5, 0.4]), 1: _eval_rows([0.7, 0.3], filtered=0.1)}
+    elsewhere = {1: _eval_rows([9.0, 9.0]), 2: _eval_rows([0.5, 0.1], filtered=0.2), 3: _eval_rows([1.0])}
+    # The summary round trip keeps every seed's values (the filter's precision is undefined where nothing
+    # was filtered: NaN, null in the JSON).
+    rebuilt = experiments.summary_runs(json.loads(json.dumps(experiments.summarize(elsewhere))), "x")
+    assert sorted(rebuilt) == [1, 2, 3] and [r["eval_final_distance"] for r in rebuilt[2]] == [0.5]
+    assert rebuilt[2][0]["frac_filtered"] == 0.2 and rebuilt[2][0]["filtered_gt_success_rate"] == 0.5
+    assert np.isnan(rebuilt[1][0]["filtered_gt_success_rate"])
+    other = tmp_path / "summary.json"
+    old_format = {  # one seed, per-seed values of the eval metrics only: the rest from the mean series
+        "seeds": [0], "n_seeds": 1, "env_steps": [100, 200], "wall_time_s_per_run": 7.0,
+        "per_seed": {"eval_success_rate": [[0.0, 1.0]], "eval_final_distance": [[0.8, 0.2]]},
+        "series": {"reward_accuracy": {"mean": [0.9, 0.95], "std": [0.0, 0.0]}},
+    }  # fmt: skip
+    other.write_text(json.dumps({"tasks": {
+        "rope_state": {"indicator": experiments.summarize({1: elsewhere[1], 2: elsewhere[2]}),
+                       "oracle": old_format},
+        "reach_state": {"oracle": old_format},
+    }}))  # fmt: skip
+    runs = {"rope_state": {"indicator": dict(here)}}
+    added = experiments.include_summaries(runs, [other], ["indicator", "oracle"], seeds=[0, 1, 2])
+    assert added == {str(other): ["rope_state/indicator/seed_2", "rope_state/oracle/seed_0"]}
+    assert runs["rope_state"]["indicator"][1] is here[1]  # run here, kept
+    ind = experiments.summarize(runs["rope_state"]["indicator"])
+    assert ind["seeds"] == [0, 1, 2] and ind["env_steps"] == [100, 200]  # the shortest seed's evaluations
+    assert ind["final_distance"]["mean"] == pytest.approx((0.5 + 0.3 + 0.1) / 3)
+    assert ind["series"]["frac_filtered"]["mean"] == pytest.approx([0.1, 0.1])
+    assert ind["wall_time_s_per_run"] == pytest.approx(20.0)
+    oracle = experiments.summarize(runs["rope_state"]["oracle"])
+    assert oracle["series"]["reward_accuracy"]["mean"] == [0.9, 0.95] and oracle["wall_time_s_per_run"] == 7.0
+    # Not mergeable: no seed ids; several seeds without per-seed values; evaluations at other env steps.
+    with pytest.raises(ValueError, match="no 'seeds' list"):
+        experiments.summary_runs({k: v for k, v in old_format.items() if k != "seeds"}, "x")
+    with pytest.raises(ValueError, match="2 seeds but no per-seed values of 'reward_accuracy'"):
+        experiments.summary_runs({**old_format, "seeds": [0, 1], "n_seeds": 2}, "x")
+    with pytest.raises(ValueError, match="seed 1: evaluations at other env steps"):
+        experiments.summarize({0: _eval_rows([0.5]), 1: [{**_eval_rows([0.5])[0], "env_steps": 150}]})
 
 
 def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):

@@ -55,8 +55,8 @@ class ExperimentConfig:
     # Extra table rows at these env-step budgets (methods run to different budgets compare at a shared one).
     table_env_steps: list[int] = field(default_factory=list)
     extra_args: list[str] = field(default_factory=list)
-    # Committed summary.json files whose methods (of --methods, for --tasks) join the summary, plot and table
-    # where runs_dir has no runs of them: runs made on another machine, whose run directories are not here.
+    # Committed summary.json files whose seeds (of --methods and --seeds, for --tasks) join the summary, plot
+    # and table where runs_dir has no run of that seed: runs made elsewhere, whose run directories are not here.
     include_summaries: list[Path] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -110,66 +110,112 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
     return time.perf_counter() - t0
 
 
-def aggregate(cfg: ExperimentConfig, task: str) -> dict:
-    """Mean and std over seeds of the eval metrics at each evaluation point, per method."""
-    result = {}
+SERIES_KEYS = (
+    "eval_success_rate",
+    "eval_final_distance",
+    "reward_accuracy",
+    "false_negative_rate",
+    "false_negative_rate_kept",
+    "frac_filtered",
+    "filtered_gt_success_rate",
+)
+
+
+def collect_runs(cfg: ExperimentConfig, task: str) -> dict[str, dict[int, list[dict]]]:
+    """method -> seed -> the eval rows of the run in ``runs_dir`` (methods and seeds with none are left out)."""
+    runs: dict[str, dict[int, list[dict]]] = {}
     for method in cfg.methods:
-        runs = [read_rows(run_dir(cfg, task, method, s) / "metrics.jsonl") for s in cfg.seeds]
-        runs = [[r for r in rows if "eval_success_rate" in r] for rows in runs]
-        runs = [r for r in runs if r]
-        if not runs:
-            continue
-        n = min(len(r) for r in runs)
-        series = {}
-        for key in (
-            "eval_success_rate",
-            "eval_final_distance",
-            "reward_accuracy",
-            "false_negative_rate",
-            "false_negative_rate_kept",
-            "frac_filtered",
-            "filtered_gt_success_rate",
-        ):
-            if any(key in row for r in runs for row in r[:n]):
-                # NaN where a row lacks the key (a metric added after the run started); null in the JSON.
-                values = np.array([[_value(row, key) for row in r[:n]] for r in runs], dtype=float)
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
-                    mean, std = np.nanmean(values, 0), np.nanstd(values, 0)
-                series[key] = {"mean": _nan_to_none(mean), "std": _nan_to_none(std)}
-        final_success = [r[n - 1]["eval_success_rate"] for r in runs]
-        final_distance = [r[n - 1]["eval_final_distance"] for r in runs]
-        result[method] = {
-            "per_seed": {  # at the shared eval points ``env_steps``
-                "eval_success_rate": [[row["eval_success_rate"] for row in r[:n]] for r in runs],
-                "eval_final_distance": [[row["eval_final_distance"] for row in r[:n]] for r in runs],
-            },
-            "env_steps": [row["env_steps"] for row in runs[0][:n]],
-            "series": series,
-            "n_seeds": len(runs),
-            "final_env_steps": runs[0][n - 1]["env_steps"],
-            "final_success_rate": {
-                "mean": float(np.mean(final_success)),
-                "std": float(np.std(final_success)),
-            },
-            "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
-            "wall_time_s_per_run": float(np.mean([r[n - 1]["wall_time_s"] for r in runs])),
-        }
-    return result
+        for seed in cfg.seeds:
+            rows = read_rows(run_dir(cfg, task, method, seed) / "metrics.jsonl")
+            rows = [r for r in rows if "eval_success_rate" in r]
+            if rows:
+                runs.setdefault(method, {})[seed] = rows
+    return runs
 
 
-def include_summaries(summary: dict, paths: list[Path], methods: list[str]) -> dict[str, list[str]]:
-    """Add to ``summary`` (task -> method -> aggregate) the ``methods`` that the summary.json files at ``paths``
-    hold and ``summary`` lacks; a method aggregated from runs here is kept. Returns what came from where."""
+def summarize(runs: dict[int, list[dict]]) -> dict:
+    """Mean and std over seeds of the eval metrics at each evaluation point the seeds share, and every seed's
+    values (``per_seed``, in the order of ``seeds``), so summaries can be merged seed by seed later."""
+    seeds = sorted(runs)
+    rows = [runs[s] for s in seeds]
+    n = min(len(r) for r in rows)
+    env_steps = [row["env_steps"] for row in rows[0][:n]]
+    for seed, r in zip(seeds, rows, strict=True):
+        if [row["env_steps"] for row in r[:n]] != env_steps:
+            raise ValueError(f"seed {seed}: evaluations at other env steps than seed {seeds[0]}'s")
+    series, per_seed = {}, {}
+    for key in SERIES_KEYS:
+        if any(key in row for r in rows for row in r[:n]):
+            # NaN where a row lacks the key (a metric added after the run started); null in the JSON.
+            values = np.array([[_value(row, key) for row in r[:n]] for r in rows], dtype=float)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
+                mean, std = np.nanmean(values, 0), np.nanstd(values, 0)
+            series[key] = {"mean": _nan_to_none(mean), "std": _nan_to_none(std)}
+            per_seed[key] = [_nan_to_none(v) for v in values]
+    final_success = [r[n - 1]["eval_success_rate"] for r in rows]
+    final_distance = [r[n - 1]["eval_final_distance"] for r in rows]
+    wall = np.array([r[n - 1].get("wall_time_s", np.nan) for r in rows], dtype=float)
+    return {
+        "seeds": seeds,
+        "per_seed": per_seed,  # at the shared eval points ``env_steps``
+        "env_steps": env_steps,
+        "series": series,
+        "n_seeds": len(rows),
+        "final_env_steps": env_steps[-1],
+        "final_success_rate": {"mean": float(np.mean(final_success)), "std": float(np.std(final_success))},
+        "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
+        "wall_time_s_per_run": None if np.isnan(wall).all() else float(np.nanmean(wall)),
+    }
+
+
+def aggregate(cfg: ExperimentConfig, task: str) -> dict:
+    """method -> ``summarize`` of its runs in ``runs_dir``."""
+    return {method: summarize(runs) for method, runs in collect_runs(cfg, task).items()}
+
+
+def summary_runs(res: dict, where: str) -> dict[int, list[dict]]:
+    """seed -> eval rows, rebuilt from one method's entry of a summary.json (what ``summarize`` keeps of them).
+
+    A one-seed entry written before ``per_seed`` held every metric gives them from its mean series."""
+    if "seeds" not in res:
+        raise ValueError(f"{where}: no 'seeds' list, so its seeds cannot be told apart from the runs here")
+    per_seed = dict(res["per_seed"])
+    for key, values in res["series"].items():
+        if key not in per_seed:
+            if res["n_seeds"] != 1:
+                raise ValueError(f"{where}: {res['n_seeds']} seeds but no per-seed values of {key!r}")
+            per_seed[key] = [values["mean"]]
+    runs = {}
+    for i, seed in enumerate(res["seeds"]):
+        rows = [{"env_steps": x} for x in res["env_steps"]]
+        for key, values in per_seed.items():
+            for row, v in zip(rows, values[i], strict=True):
+                row[key] = np.nan if v is None else v
+        if res["n_seeds"] == 1 and res.get("wall_time_s_per_run") is not None:
+            rows[-1]["wall_time_s"] = res["wall_time_s_per_run"]
+        runs[seed] = rows
+    return runs
+
+
+def include_summaries(
+    runs: dict[str, dict[str, dict[int, list[dict]]]], paths: list[Path], methods: list[str], seeds: list[int]
+) -> dict[str, list[str]]:
+    """Add to ``runs`` (task -> method -> seed -> eval rows) the seeds of ``methods`` among ``seeds`` that the
+    summary.json files at ``paths`` hold and ``runs`` lacks: runs made elsewhere, whose run directories are
+    not here. A seed run here is kept. Returns what came from where (``task/method/seed_N``)."""
     added: dict[str, list[str]] = {}
     for path in paths:
         for task, results in json.loads(Path(path).read_text())["tasks"].items():
-            if task not in summary:
+            if task not in runs:
                 continue
             for method, res in results.items():
-                if method in methods and method not in summary[task]:
-                    summary[task][method] = res
-                    added.setdefault(str(path), []).append(f"{task}/{method}")
+                if method not in methods:
+                    continue
+                for seed, rows in summary_runs(res, f"{path}: {task}/{method}").items():
+                    if seed in seeds and seed not in runs[task].get(method, {}):
+                        runs[task].setdefault(method, {})[seed] = rows
+                        added.setdefault(str(path), []).append(f"{task}/{method}/seed_{seed}")
     return added
 
 
@@ -288,8 +334,11 @@ def main() -> None:
             for seed in cfg.seeds:
                 for method in cfg.methods:
                     wall[f"{task}/{method}/{seed}"] = launch(cfg, task, method, seed)
-    summary = {task: aggregate(cfg, task) for task in cfg.tasks}
-    included = include_summaries(summary, cfg.include_summaries, cfg.methods)
+    runs = {task: collect_runs(cfg, task) for task in cfg.tasks}
+    included = include_summaries(runs, cfg.include_summaries, cfg.methods, cfg.seeds)
+    summary = {
+        task: {m: summarize(runs[task][m]) for m in cfg.methods if m in runs[task]} for task in cfg.tasks
+    }
     meta = {
         "command": shlex.join([sys.executable, *sys.argv]),
         "machine": f"{platform.node()} {platform.machine()} {os.cpu_count()} CPUs",

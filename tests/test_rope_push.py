@@ -114,6 +114,30 @@ def test_push_missing_rope_does_not_move_it(state_env):
     assert np.abs(state_env.sim.link_positions() - links).max() < 1e-3
 
 
+def test_push_that_goes_unstable_is_undone(state_env, caplog):
+    """MuJoCo resets every joint (the straight rope) when the simulation blows up; such a push is undone and
+    reported, so no transition shows a rope that jumped to straight. The next push works as usual."""
+    links = straight(state_env)
+    push_points(
+        state_env, links[7, :2] + [0, 0.2], links[7, :2] - [0, 0.2]
+    )  # a bent rope: not the reset state
+    sim, qpos = state_env.sim, state_env.data.qpos.copy()
+    across = sim.points_to_action(links[3, :2] + [0, 0.2], links[3, :2] - [0, 0.2])
+
+    def blow_up():
+        state_env.data.qvel[0] = 1e12  # past MuJoCo's mjMAXVAL: its bad-qvel warning and auto-reset
+        sim.on_push_step = None
+
+    sim.on_push_step = blow_up
+    with caplog.at_level("WARNING", logger="lerobot_indicator.envs.rope_sim"):
+        assert sim.push(across) is False
+    assert np.array_equal(state_env.data.qpos, qpos) and not np.array_equal(qpos, sim.straight_qpos)
+    assert "went unstable" in caplog.text and "mjWARN_BADQVEL" in caplog.text
+    caplog.clear()
+    assert sim.push(across) is True and not np.array_equal(state_env.data.qpos, qpos)
+    assert "went unstable" not in caplog.text
+
+
 def test_replaying_hidden_goal_pushes_succeeds(state_env):
     successes = exact = 0
     for seed in range(5):

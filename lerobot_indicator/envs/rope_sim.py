@@ -10,7 +10,11 @@ environment:
   the line until lowering there cannot touch the rope (documented difference: the authors lowered onto
   the rope, which with a kinematic pusher squeezes links into the table);
 * the pusher is put above the start at ``lift_z``, lowered to ``push_z``, pushed in a straight line to
-  the end point, lifted, and parked out of the camera's view; the rope then settles.
+  the end point, lifted, and parked out of the camera's view; the rope then settles;
+* a push during which the simulation went unstable (MuJoCo's NaN/Inf/huge qpos, qvel or qacc warning, after
+  which MuJoCo silently resets every joint to the straight rope) is undone: the rope is put back where it
+  was and the push counts as skipped, with a logged warning, so no transition shows a rope that jumped
+  to straight.
 
 After every push the state is canonicalised (velocities, warm start and time zeroed, pusher parked), so
 the simulator state is a function of ``qpos`` alone: cached states restore bit-exactly and the same
@@ -19,11 +23,14 @@ pushes from the same state give bit-identical rope configurations.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from lerobot_indicator.envs.rope_scene import PUSHER_BODY, RopeGeometry, link_geom_name
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -98,6 +105,10 @@ class RopeSim:
         self.straight_qpos = model.qpos0.copy()
         # Called after every physics step while the pusher moves (e.g. to film a push); None: nothing.
         self.on_push_step = None
+        warning = mujoco.mjtWarning
+        self._instability_warnings = [
+            int(w) for w in (warning.mjWARN_BADQPOS, warning.mjWARN_BADQVEL, warning.mjWARN_BADQACC)
+        ]
 
     # ----- state -------------------------------------------------------------------------------
     def canonicalize(self) -> None:
@@ -175,11 +186,30 @@ class RopeSim:
         return float(np.clip(np.maximum(t_enter[ahead], 0.0).min(), 0.0, 1.0))
 
     def push(self, action: np.ndarray) -> bool:
-        """Execute one push; False when it was skipped because the pusher cannot touch the rope."""
+        """Execute one push; False when it was skipped: the pusher cannot touch the rope, or the simulation
+        went unstable during it (the rope is then put back where it was)."""
         start, end = self.action_to_points(action)
         length = float(np.linalg.norm(end - start))
         if length < 1e-6 or self._distances_to_segment(start, end).min() > self.reach:
             return False
+        before = self.data.qpos.copy()
+        for w in self._instability_warnings:
+            self.data.warning[w].number = 0
+        self._push(start, end, length)
+        unstable = [w for w in self._instability_warnings if self.data.warning[w].number > 0]
+        if unstable:
+            logger.warning(
+                "rope push %s: the simulation went unstable (MuJoCo warning %s); the push is undone",
+                np.round(np.asarray(action, dtype=float), 4).tolist(),
+                [self._mj.mjtWarning(w).name for w in unstable],
+            )
+            for w in unstable:
+                self.data.warning[w].number = 0
+            self.set_qpos(before)
+            return False
+        return True
+
+    def _push(self, start: np.ndarray, end: np.ndarray, length: float) -> None:
         c = self.config
         direction = (end - start) / length
         p = start + self._first_t_within(start, end, c.approach_distance) * (end - start)
@@ -193,7 +223,6 @@ class RopeSim:
         self.data.mocap_pos[self.mocap_id] = c.geometry.park_pos
         self._settle()
         self.canonicalize()
-        return True
 
     def _glide(self, target: np.ndarray, speed: float) -> None:
         """Move the pusher in a straight line at ``speed``, one physics step per increment."""

@@ -157,17 +157,46 @@ def test_experiments_aggregate_and_table_at_a_shared_budget(tmp_path):
     assert precision[0] is None and precision[1:] == pytest.approx([0.375, 0.375])
 
     text = experiments.table({"rope_state": summary}, env_steps=[200, 300], window=2)
-    rows = [[c.strip() for c in line.split("|")[2:9]] for line in text.splitlines() if "| rope_state" in line]
+    rows = [
+        [c.strip() for c in line.split("|")[2:10]] for line in text.splitlines() if "| rope_state" in line
+    ]
     # last-2 window: Indicator seeds (0.55, 0.5) at 200; I+B+F seeds (0.3, 0.5) at 300, (0.5, 0.7) at 200;
     # the last column: mean success over seeds never reaches 0.9 here ("-")
     ind, ibf = "Indicator", "Indicator+Balance+Filter"
-    assert rows[0] == [ind, "2", "200", "0.50 ± 0.50", "0.400 ± 0.100", "0.525 ± 0.025", "-"]  # final
-    assert rows[1] == [ibf, "2", "300", "0.50 ± 0.50", "0.300 ± 0.100", "0.400 ± 0.100", "-"]  # final
-    assert rows[2] == [ibf, "2", "200", "0.00 ± 0.00", "0.500 ± 0.100", "0.600 ± 0.100", "-"]  # at 200
+    assert rows[0] == [
+        ind,
+        "2",
+        "200",
+        "0.50 ± 0.50",
+        "0.400 ± 0.100",
+        "0.525 ± 0.025",
+        "-",
+        "s0 0.550, s1 0.500",
+    ]
+    assert rows[1] == [
+        ibf,
+        "2",
+        "300",
+        "0.50 ± 0.50",
+        "0.300 ± 0.100",
+        "0.400 ± 0.100",
+        "-",
+        "s0 0.300, s1 0.500",
+    ]
+    assert rows[2] == [
+        ibf,
+        "2",
+        "200",
+        "0.00 ± 0.00",
+        "0.500 ± 0.100",
+        "0.600 ± 0.100",
+        "-",
+        "s0 0.500, s1 0.700",
+    ]
     # No budget row repeats a final row (Indicator's 200, I+B+F's 300); Indicator never reached 300.
     assert len(rows) == 3
     summary["indicator"]["per_seed"]["eval_success_rate"] = [[0.8, 1.0], [1.0, 0.9]]  # mean 0.9 at 100
-    assert experiments.table({"rope_state": summary}).splitlines()[2].split("|")[-2].strip() == "100"
+    assert experiments.table({"rope_state": summary}).splitlines()[2].split("|")[8].strip() == "100"
     fig = experiments.plot({"rope_state": summary}, tmp_path / "comparison.png")
     assert (tmp_path / "comparison.png").stat().st_size > 0
     success, distance = fig.axes[0], fig.axes[1]

@@ -296,11 +296,12 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
     """Success and final distance (mean ± std over seeds) per method at its last evaluation, then at each of
     ``env_steps`` for the methods that went past it; the last column averages each seed's final distance over
     the ``window`` evaluations ending there (one evaluation of 10-20 goals is noisy), and the first evaluation
-    where the mean success over seeds reached ``SOLVED`` (learning speed, what the reach comparison measures)."""
+    where the mean success over seeds reached ``SOLVED`` (learning speed, what the reach comparison measures),
+    then that window's value for each seed (with few seeds, the spread a mean ± std hides)."""
     lines = [
         f"| task | method | seeds | env steps | success rate | final distance | final distance, last {window} evals "
-        f"| first env steps with mean success >= {SOLVED} |",
-        "|---|---|---|---|---|---|---|---|",
+        f"| first env steps with mean success >= {SOLVED} | last {window} evals per seed |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for budget in [None, *(env_steps or [])]:
         for task, methods in summary.items():
@@ -318,7 +319,11 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
                 lines.append(
                     f"| {task} | {LABELS[method]} | {res['n_seeds']} | {steps[i]} | "
                     f"{np.mean(success):.2f} ± {np.std(success):.2f} | {np.mean(distance):.3f} ± {np.std(distance):.3f}"
-                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} | {solved[0] if solved else '-'} |"
+                    f" | {np.mean(recent):.3f} ± {np.std(recent):.3f} | {solved[0] if solved else '-'} | "
+                    + ", ".join(
+                        f"s{seed} {r:.3f}" for seed, r in zip(res.get("seeds", []), recent, strict=False)
+                    )
+                    + " |"
                 )
     return "\n".join(lines)
 

@@ -216,10 +216,11 @@ def test_included_summaries_merge_seed_by_seed(tmp_path):
     is added, seeds not asked for are left out, and the merged aggregate is the one of all the seeds' rows."""
     here = {0: _eval_rows([0.6, 0.5, 0.4]), 1: _eval_rows([0.7, 0.3], filtered=0.1)}
     elsewhere = {1: _eval_rows([9.0, 9.0]), 2: _eval_rows([0.5, 0.1], filtered=0.2), 3: _eval_rows([1.0])}
-    # The summary round trip keeps every seed's values (the filter's precision is undefined where nothing
+    # The summary round trip keeps every seed's values, past the evaluations all seeds share (the filter's precision is undefined where nothing
     # was filtered: NaN, null in the JSON).
     rebuilt = experiments.summary_runs(json.loads(json.dumps(experiments.summarize(elsewhere))), "x")
-    assert sorted(rebuilt) == [1, 2, 3] and [r["eval_final_distance"] for r in rebuilt[2]] == [0.5]
+    assert sorted(rebuilt) == [1, 2, 3] and [r["eval_final_distance"] for r in rebuilt[2]] == [0.5, 0.1]
+    assert [r["env_steps"] for r in rebuilt[3]] == [100]  # each seed's whole curve, the longer ones too
     assert rebuilt[2][0]["frac_filtered"] == 0.2 and rebuilt[2][0]["filtered_gt_success_rate"] == 0.5
     assert np.isnan(rebuilt[1][0]["filtered_gt_success_rate"])
     other = tmp_path / "summary.json"

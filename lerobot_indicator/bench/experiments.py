@@ -134,23 +134,28 @@ def collect_runs(cfg: ExperimentConfig, task: str) -> dict[str, dict[int, list[d
 
 
 def summarize(runs: dict[int, list[dict]]) -> dict:
-    """Mean and std over seeds of the eval metrics at each evaluation point the seeds share, and every seed's
-    values (``per_seed``, in the order of ``seeds``), so summaries can be merged seed by seed later."""
+    """Mean and std over seeds of the eval metrics at each evaluation point the seeds share (``env_steps``),
+    and every seed's whole curve (``per_seed``, in the order of ``seeds``, at the first evaluations of
+    ``per_seed_env_steps``), so summaries can be merged seed by seed later without losing a longer seed."""
     seeds = sorted(runs)
     rows = [runs[s] for s in seeds]
     n = min(len(r) for r in rows)
-    env_steps = [row["env_steps"] for row in rows[0][:n]]
+    longest = max(rows, key=len)
+    all_steps = [row["env_steps"] for row in longest]
     for seed, r in zip(seeds, rows, strict=True):
-        if [row["env_steps"] for row in r[:n]] != env_steps:
-            raise ValueError(f"seed {seed}: evaluations at other env steps than seed {seeds[0]}'s")
+        if [row["env_steps"] for row in r] != all_steps[: len(r)]:
+            raise ValueError(
+                f"seed {seed}: evaluations at other env steps than seed {seeds[rows.index(longest)]}'s"
+            )
     series, per_seed = {}, {}
     for key in SERIES_KEYS:
-        if any(key in row for r in rows for row in r[:n]):
+        if any(key in row for r in rows for row in r):
             # NaN where a row lacks the key (a metric added after the run started); null in the JSON.
-            values = np.array([[_value(row, key) for row in r[:n]] for r in rows], dtype=float)
+            values = [np.array([_value(row, key) for row in r], dtype=float) for r in rows]
+            shared = np.array([v[:n] for v in values])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns stay NaN
-                mean, std = np.nanmean(values, 0), np.nanstd(values, 0)
+                mean, std = np.nanmean(shared, 0), np.nanstd(shared, 0)
             series[key] = {"mean": _nan_to_none(mean), "std": _nan_to_none(std)}
             per_seed[key] = [_nan_to_none(v) for v in values]
     final_success = [r[n - 1]["eval_success_rate"] for r in rows]
@@ -158,11 +163,12 @@ def summarize(runs: dict[int, list[dict]]) -> dict:
     wall = np.array([r[n - 1].get("wall_time_s", np.nan) for r in rows], dtype=float)
     return {
         "seeds": seeds,
-        "per_seed": per_seed,  # at the shared eval points ``env_steps``
-        "env_steps": env_steps,
+        "per_seed": per_seed,
+        "per_seed_env_steps": all_steps,
+        "env_steps": all_steps[:n],
         "series": series,
         "n_seeds": len(rows),
-        "final_env_steps": env_steps[-1],
+        "final_env_steps": all_steps[n - 1],
         "final_success_rate": {"mean": float(np.mean(final_success)), "std": float(np.std(final_success))},
         "final_distance": {"mean": float(np.mean(final_distance)), "std": float(np.std(final_distance))},
         "wall_time_s_per_run": None if np.isnan(wall).all() else float(np.nanmean(wall)),
@@ -188,7 +194,8 @@ def summary_runs(res: dict, where: str) -> dict[int, list[dict]]:
             per_seed[key] = [values["mean"]]
     runs = {}
     for i, seed in enumerate(res["seeds"]):
-        rows = [{"env_steps": x} for x in res["env_steps"]]
+        steps = res.get("per_seed_env_steps", res["env_steps"])[: len(per_seed["eval_success_rate"][i])]
+        rows = [{"env_steps": x} for x in steps]
         for key, values in per_seed.items():
             for row, v in zip(rows, values[i], strict=True):
                 row[key] = np.nan if v is None else v
@@ -310,7 +317,7 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
                 if budget is not None and (budget not in steps or budget == steps[-1]):
                     continue  # not reached, or already the final row
                 i = len(steps) - 1 if budget is None else steps.index(budget)
-                seeds = res["per_seed"]
+                seeds = {k: [v[: len(steps)] for v in vs] for k, vs in res["per_seed"].items()}
                 success = [v[i] for v in seeds["eval_success_rate"]]
                 distance = [v[i] for v in seeds["eval_final_distance"]]
                 recent = [np.mean(v[max(0, i - window + 1) : i + 1]) for v in seeds["eval_final_distance"]]

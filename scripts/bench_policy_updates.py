@@ -2,7 +2,8 @@
 
 RGB-D arms at 64 and 100 px, batch 128, timed in one interleaved run (``lerobot_indicator.bench``): the
 paper's encoder, the default ("drq") encoder, each also with float32 convs, "drq" with 3-step targets and the
-inverse-dynamics loss (the setting that learns RGB-D reach), that one also compiled (``compile_model``), and
+inverse-dynamics loss (the setting that learns RGB-D reach), that one also compiled (``compile_model``), "drq"
+with each conv and its ReLU as plain ops rather than one fused oneDNN primitive, and
 LeRobot's SAC (``gaussian_actor`` + ``SACAlgorithm``) on the same image size and batch, with its convs trained
 (as ours) and frozen (its config default); plus the state-based update (batch 256). For each arm the matmul/conv FLOPs
 of one update and their share of the measured peak. ``--dataset-cost`` also times what fetching future frames
@@ -21,7 +22,14 @@ from pathlib import Path
 import torch
 
 from lerobot_indicator.bench.dataset_loading import bench_dataset
-from lerobot_indicator.bench.peers import COMPILED, ENCODERS, make_arms, matmul_conv_flops, measure_peaks
+from lerobot_indicator.bench.peers import (
+    COMPILED,
+    ENCODERS,
+    UNFUSED,
+    make_arms,
+    matmul_conv_flops,
+    measure_peaks,
+)
 from lerobot_indicator.bench.records import cpu_model, git_commit
 from lerobot_indicator.bench.updates import interleaved_rates
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
@@ -56,7 +64,9 @@ def main() -> None:
         r["share_of_best_measured_peak"] = r["gflop_per_s"] / peak
     ratios = {}
     for size in args.sizes:
-        rate = {name: results[f"{name}_{size}px"]["updates_per_s"] for name in (*ENCODERS, "lerobot_sac")}
+        rate = {
+            name: results[f"{name}_{size}px"]["updates_per_s"] for name in (*ENCODERS, UNFUSED, "lerobot_sac")
+        }
         ratios[f"{size}px"] = {
             "drq_over_paper": rate["drq"] / rate["paper"],
             "drq_over_paper_fp32": rate["drq"] / rate["paper_fp32"],
@@ -67,6 +77,7 @@ def main() -> None:
             "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
             "drq_light_over_paper": rate["drq_light"] / rate["paper"],
             "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
+            "drq_fused_over_unfused_conv_relu": rate["drq"] / rate[UNFUSED],
         }
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()
     record = {

@@ -6,6 +6,7 @@ import re
 
 import pytest
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
 from lerobot_indicator.bench.records import git_commit
@@ -69,6 +70,28 @@ def test_fused_conv_relu_counts_the_flops_of_the_plain_conv():
     # forward 2 * 3*8*8*8 outputs * 36 MACs, backward twice that (input and weight gradients)
     assert plain == 3 * 2 * (3 * 8 * 8 * 8) * 36
     assert matmul_conv_flops(step(conv_relu)) == plain
+
+
+def test_unfused_arm_runs_plain_convs_and_the_default_runs_fused_ones():
+    from lerobot_indicator.bench.peers import without_fused_conv_relu
+    from lerobot_indicator.policy.networks_indicator_ddpg import conv_relu
+
+    x = torch.randn(2, 4, 9, 9).contiguous(memory_format=torch.channels_last)
+    w, b = torch.randn(8, 4, 3, 3), torch.randn(8)
+    calls = []
+
+    def step() -> None:
+        counter = FlopCounterMode(display=False)
+        with counter:
+            conv_relu(x, w, b, 1)
+        calls.append({str(op) for op in counter.get_flop_counts()["Global"]})
+
+    step()
+    without_fused_conv_relu(step)()
+    step()
+    assert calls[0] == {"mkldnn._convolution_pointwise"}
+    assert calls[1] == {"aten.convolution"}
+    assert calls[2] == calls[0]  # the patch is undone after the arm's step
 
 
 def test_flops_positive_and_linear_in_batch():

@@ -85,6 +85,15 @@ VARIANTS["indicator_balance_filter_calibrated"] = [
     *METHODS["indicator_balance_filter"],
     "--policy.filter_start=calibrated",
 ]
+# The same options on the RGB-D rope push comparison's arm, where the filter drops the most genuine negatives.
+for _option, _arg in (
+    ("target_q", "--policy.filter_q=target"),
+    ("calibrated", "--policy.filter_start=calibrated"),
+):
+    VARIANTS[f"indicator_balance_filter_n3_inverse_dynamics_{_option}"] = [
+        *VARIANTS["indicator_balance_filter_n3_inverse_dynamics"],
+        _arg,
+    ]
 METHODS.update(LEARNED_REWARD_METHODS)
 # The learned-reward baselines with the same 3-step targets and inverse-dynamics loss as the arms they are
 # compared with on RGB-D rope push.
@@ -123,6 +132,12 @@ LABELS = {
     "indicator_balance_filter_inverse_dynamics_no_augmentation": "Indicator+Balance+Filter, inverse dynamics, no augmentation",
     "indicator_balance_filter_target_q": "Indicator+Balance+Filter, filter Q from the target critic",
     "indicator_balance_filter_calibrated": "Indicator+Balance+Filter, filter once Q is calibrated",
+    "indicator_balance_filter_n3_inverse_dynamics_target_q": (
+        "Indicator+Balance+Filter, 3-step, inverse dynamics, filter Q from the target critic"
+    ),
+    "indicator_balance_filter_n3_inverse_dynamics_calibrated": (
+        "Indicator+Balance+Filter, 3-step, inverse dynamics, filter once Q is calibrated"
+    ),
     "ae": "AE",
     "vae": "VAE",
     "ae_n3_inverse_dynamics": "AE, 3-step, inverse dynamics",
@@ -154,6 +169,8 @@ STYLES = {
     "indicator_balance_filter_inverse_dynamics_no_augmentation": ("tab:brown", "--"),
     "indicator_balance_filter_target_q": ("tab:cyan", "--"),
     "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
+    "indicator_balance_filter_n3_inverse_dynamics_target_q": ("tab:red", "--"),
+    "indicator_balance_filter_n3_inverse_dynamics_calibrated": ("tab:red", ":"),
     "ae": ("black", "-"),
     "vae": ("black", "--"),
     "ae_n3_inverse_dynamics": ("black", "-"),

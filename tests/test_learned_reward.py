@@ -3,6 +3,7 @@
 import json
 import math
 
+import numpy as np
 import pytest
 import torch
 from lerobot.configs import FeatureType
@@ -229,6 +230,16 @@ def test_short_online_rope_rgbd_run_trains_and_reloads_the_reward_model(tmp_path
     for name, value in loaded.reward_model.state_dict().items():
         torch.testing.assert_close(value, model_state[name])
 
+    from lerobot_indicator.bench import learned_reward_probe as probe
+
+    cfg = probe.LearnedRewardProbeConfig(
+        run_dirs=[tmp_path / "run"], last_cycles=1, pairs=12, out=tmp_path / "p.json"
+    )
+    (run,) = probe.run(cfg)["runs"].values()
+    assert run["reward"] == reward and list(run["steps"]) == [6]
+    assert run["steps"][6]["on_policy"]["episodes"] == 1
+    assert json.loads((tmp_path / "p.json").read_text())["runs"][str(tmp_path / "run")]["reward"] == reward
+
 
 def test_every_method_arm_has_a_label_a_style_and_valid_policy_flags():
     import draccus
@@ -246,3 +257,48 @@ def test_every_method_arm_has_a_label_a_style_and_valid_policy_flags():
             "oracle" if name.startswith("oracle") else learned if learned in ("ae", "vae") else "indicator"
         )
         assert cfg.reward == expected, name
+
+
+def _probe_episodes(n_ep: int, size: int = 8) -> dict:
+    """Episodes whose every pixel is the ground-truth x of the frame (and of the goal), y = 0."""
+    from lerobot_indicator.training.run_state import CHUNK_GT_ACHIEVED, CHUNK_GT_DESIRED
+
+    rng = np.random.default_rng(0)
+    x, gx = rng.integers(0, 9, size=(n_ep, 4)) / 8, rng.integers(0, 9, size=n_ep) / 8
+
+    def image(v: np.ndarray, channels: int) -> np.ndarray:
+        return np.broadcast_to(v[..., None, None, None], (*v.shape, channels, size, size)).astype(np.float32)
+
+    return {
+        f"obs/{RGB}": image(x, 3), f"obs/{DEPTH}": image(x, 1),
+        f"obs/{goal_key(RGB)}": image(gx[:, None], 3), f"obs/{goal_key(DEPTH)}": image(gx[:, None], 1),
+        CHUNK_GT_ACHIEVED: np.stack([x, 0 * x], -1), CHUNK_GT_DESIRED: np.stack([gx, 0 * gx], -1),
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_learned_reward_probe_ranks_a_reward_against_ground_truth_distance(sign):
+    """A reward equal to minus the ground-truth distance ranks it perfectly (Spearman 1, AUC 1, on-policy
+    reward = -distance); the same reward with the sign flipped ranks it exactly backwards."""
+    from lerobot_indicator.bench import learned_reward_probe as probe
+
+    policy, _ = policy_and_batch("ae")
+
+    def reward(frames: dict, goal: dict) -> torch.Tensor:
+        return -sign * (frames[RGB].mean(dim=(1, 2, 3)) - goal[RGB].mean(dim=(1, 2, 3))).abs()
+
+    policy.reward_model.reward = reward
+    episodes = _probe_episodes(n_ep=40)
+    cfg = probe.LearnedRewardProbeConfig(last_cycles=5, pairs=300, batch_size=64)
+    record = probe.probe(policy, episodes, cfg, episodes_per_cycle=4)
+
+    on, pairs = record["on_policy"], record["pairs"]
+    gt, goal = episodes["gt_achieved"][20:, :, 0], episodes["gt_desired"][20:, None, 0]
+    assert on["episodes"] == 20
+    assert on["distance_start"] == pytest.approx(np.abs(gt[:, 0] - goal[:, 0]).mean())
+    assert on["distance_final"] == pytest.approx(np.abs(gt[:, -1] - goal[:, 0]).mean())
+    assert on["reward_final"] == pytest.approx(-sign * on["distance_final"])
+    assert on["spearman_final"] == pytest.approx(sign)
+    assert pairs["spearman"] == pytest.approx(sign)
+    same = pairs["same_episode"]
+    assert 0 < same["success_share"] < 1 and same["reward_auc"] == pytest.approx((1 + sign) / 2)

@@ -15,6 +15,7 @@ successes (the filter's precision). Ground truth is only read here, never by tra
 import json
 import shlex
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -101,23 +102,28 @@ def diagnose(policy: IndicatorDDPGPolicy, buffer: EpisodeReplayBuffer, cfg: Filt
     return out
 
 
+def step_checkpoints(run_dir: Path) -> Iterator[tuple[int, IndicatorDDPGPolicy, dict]]:
+    """(step, policy on the CPU in eval mode, the run's ``online`` settings) of each step checkpoint of an
+    online run directory, oldest first."""
+    checkpoints = sorted(p for p in (run_dir / "checkpoints").glob("[0-9]*") if p.is_dir())
+    if not checkpoints:
+        raise FileNotFoundError(f"{run_dir}/checkpoints has no step checkpoints")
+    for ckpt in checkpoints:
+        model = ckpt / "pretrained_model"
+        online = json.loads((model / "train_config.json").read_text())["online"]
+        yield int(ckpt.name), IndicatorDDPGPolicy.from_pretrained(model).to("cpu").eval(), online
+
+
 def run(cfg: FilterDiagnosticsConfig) -> dict:
     """Diagnose every checkpoint of every run; writes ``cfg.out`` (JSON) when given."""
     if not cfg.run_dirs:
         raise ValueError("--run_dirs is empty: give online training output directories")
     runs = {}
     for run_dir in cfg.run_dirs:
-        checkpoints = sorted(p for p in (run_dir / "checkpoints").glob("[0-9]*") if p.is_dir())
-        if not checkpoints:
-            raise FileNotFoundError(f"{run_dir}/checkpoints has no step checkpoints")
         per_step = {}
-        for ckpt in checkpoints:
-            model = ckpt / "pretrained_model"
-            train_cfg = json.loads((model / "train_config.json").read_text())
-            policy = IndicatorDDPGPolicy.from_pretrained(model).to("cpu").eval()
-            step = int(ckpt.name)
+        for step, policy, online in step_checkpoints(run_dir):
             c = policy.config
-            buffer = buffer_at(run_dir, step, train_cfg["online"]["updates_per_cycle"], c.horizon)
+            buffer = buffer_at(run_dir, step, online["updates_per_cycle"], c.horizon)
             per_step[step] = diagnose(policy, buffer, cfg)
             a = per_step[step]["all"]
             print(

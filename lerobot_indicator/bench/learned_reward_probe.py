@@ -18,7 +18,6 @@ that directly for a saved ``--policy.reward=ae|vae`` run, at its checkpoints:
 Ground truth is read here only, never by training.
 """
 
-import json
 import shlex
 import sys
 from dataclasses import dataclass, field
@@ -28,6 +27,7 @@ import numpy as np
 import torch
 from scipy.stats import spearmanr
 
+from lerobot_indicator.bench.filter_diagnostics import step_checkpoints
 from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core as core
@@ -147,17 +147,12 @@ def run(cfg: LearnedRewardProbeConfig) -> dict:
         raise ValueError("--run_dirs is empty: give online training output directories of ae / vae runs")
     runs = {}
     for run_dir in cfg.run_dirs:
-        checkpoints = sorted(p for p in (run_dir / "checkpoints").glob("[0-9]*") if p.is_dir())
-        if not checkpoints:
-            raise FileNotFoundError(f"{run_dir}/checkpoints has no step checkpoints")
         per_step = {}
-        for ckpt in checkpoints:
-            model = ckpt / "pretrained_model"
-            online = json.loads((model / "train_config.json").read_text())["online"]
-            policy = IndicatorDDPGPolicy.from_pretrained(model).to("cpu").eval()
+        for step, policy, online in step_checkpoints(run_dir):
             if policy.reward_model is None:
-                raise ValueError(f"{model}: reward={policy.config.reward!r} has no learned reward to probe")
-            step = int(ckpt.name)
+                raise ValueError(
+                    f"{run_dir} step {step}: reward={policy.config.reward!r} has no learned reward"
+                )
             episodes = load_episodes(
                 run_dir, policy.config.observation_keys, step // online["updates_per_cycle"]
             )

@@ -185,10 +185,11 @@ def test_online_rollouts_are_recorded_as_a_lerobot_dataset(tmp_path, monkeypatch
 
 
 KILLED_AT_CALL = """
-import importlib, os, sys
+import importlib, os, signal, sys
 from lerobot_indicator.training import online
 
-# KILL_AT = module:Class.method:N raises KeyboardInterrupt at the N-th call of that method.
+# KILL_AT = module:Class.method:N raises KeyboardInterrupt at the N-th call of that method, or with
+# KILL_WITH=SIGTERM sends this process SIGTERM there.
 module, method, call_index = os.environ["KILL_AT"].split(":")
 owner_name, method = method.split(".")
 owner = getattr(importlib.import_module(module), owner_name)
@@ -198,6 +199,8 @@ original, calls = getattr(owner, method), []
 def killed(self, *args):
     calls.append(1)
     if len(calls) == int(call_index):
+        if os.environ.get("KILL_WITH") == "SIGTERM":
+            os.kill(os.getpid(), signal.SIGTERM)
         raise KeyboardInterrupt
     return original(self, *args)
 
@@ -209,18 +212,21 @@ online.main()
 
 
 @pytest.mark.parametrize(
-    ("checkpoint_every_s", "kill_at"),
+    ("checkpoint_every_s", "kill_at", "kill_with", "exit_code"),
     [
         # Cycle 1's episodes are recorded and checkpointed, its resume state is not saved: the resumed run
         # replays cycle 1 and must skip the episode the dataset already has.
-        ("0", "lerobot_indicator.training.run_state:RunDir.save_state:2"),
-        # Dataset checkpoint + resume state only after cycle 0; killed while training cycle 2: the dataset
+        ("0", "lerobot_indicator.training.run_state:RunDir.save_state:2", "Ctrl-C", 130),
+        # Dataset checkpoint + resume state only after cycle 0; SIGTERM while training cycle 2: the dataset
         # rolls back to its checkpoint and cycles 1-2 are replayed and recorded once.
-        ("3600", "lerobot_indicator.training.online:OnlineTrainer.optimise:3"),
+        ("3600", "lerobot_indicator.training.online:OnlineTrainer.optimise:3", "SIGTERM", 143),
     ],
 )
-def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoint_every_s, kill_at):
-    """A run killed with --record and resumed ends with the same dataset as an uninterrupted run."""
+def test_resumed_recording_has_each_episode_once(
+    tmp_path, monkeypatch, checkpoint_every_s, kill_at, kill_with, exit_code
+):
+    """A run stopped by Ctrl-C or SIGTERM with --record and resumed ends with the same dataset as an
+    uninterrupted run; it stops with the shell's exit code for that signal and one line saying how to go on."""
     from lerobot.datasets import LeRobotDataset
 
     def record_args(name: str) -> list[str]:
@@ -238,9 +244,9 @@ def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, checkpoi
         [sys.executable, "-c", KILLED_AT_CALL, *split],
         capture_output=True,
         text=True,
-        env={**_env(), "KILL_AT": kill_at},
+        env={**_env(), "KILL_AT": kill_at, "KILL_WITH": kill_with},
     )
-    assert proc.returncode == 130, proc.stderr[-2000:]
+    assert proc.returncode == exit_code, proc.stderr[-2000:]
     last_lines = proc.stderr.strip().splitlines()[-1]
     assert "interrupted: the run continues from its resume/ state" in last_lines, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr

@@ -15,6 +15,7 @@ Benchmarks and loggers time the phases through ``TrainerHooks`` (``hooks``).
 import functools
 import logging
 import math
+import signal
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -401,9 +402,19 @@ def train(cfg: OnlineTrainConfig) -> dict[str, float]:
         trainer.close()
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a scheduler's preemption) raised in the main thread, so the run stops as on Ctrl-C:
+    the env workers, the recorded dataset and wandb are closed instead of left to die with the process."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated(signal.Signals(signum).name)
+
+
 def main() -> None:
     init_logging()
     register_third_party_plugins()
+    signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         train()
     except NonFiniteError as e:
@@ -411,12 +422,12 @@ def main() -> None:
             "stopped: %s. Nothing non-finite was saved; the last checkpoint and resume state are kept.", e
         )
         raise SystemExit(1) from None
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         logging.error(
             "interrupted: the run continues from its resume/ state (the last completed cycle; with --record, the "
             "last dataset checkpoint) with the same command and --resume=true"
         )
-        raise SystemExit(130) from None
+        raise SystemExit(128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)) from None
 
 
 if __name__ == "__main__":

@@ -92,6 +92,32 @@ def local_run(tmp_path_factory):
     return _train(tmp_path_factory.mktemp("local") / "run")
 
 
+def test_starting_ray_keeps_the_callers_sigterm_handler(monkeypatch):
+    """Ray's ``init`` installs its own SIGTERM handler (exit at once); the trainer's must survive it."""
+    import signal
+    import sys
+    import types
+
+    def rays_handler(signum, frame):
+        raise SystemExit(signum)
+
+    def trainers_handler(signum, frame):
+        raise KeyboardInterrupt
+
+    fake = types.SimpleNamespace(
+        is_initialized=lambda: False,
+        init=lambda **kwargs: signal.signal(signal.SIGTERM, rays_handler),
+        remote=lambda **kwargs: lambda cls: types.SimpleNamespace(remote=lambda cfg: object()),
+    )
+    monkeypatch.setitem(sys.modules, "ray", fake)
+    previous = signal.signal(signal.SIGTERM, trainers_handler)
+    try:
+        RayRollouts(cfg=None, num_workers=1)
+        assert signal.getsignal(signal.SIGTERM) is trainers_handler
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def test_two_ray_workers_equal_the_local_backend_despite_a_killed_worker(
     ray_cluster, local_run, tmp_path, monkeypatch
 ):

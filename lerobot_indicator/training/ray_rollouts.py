@@ -17,6 +17,8 @@ from __future__ import annotations
 import copy
 import logging
 import pickle
+import signal
+import threading
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -121,8 +123,13 @@ class RayRollouts:
 
         self.owns_ray = not ray.is_initialized()
         if self.owns_ray:
+            # Ray's driver swaps in a SIGTERM handler that exits at once; the caller's is put back, so that
+            # lerobot-indicator-train still stops as on Ctrl-C (workers, dataset and wandb closed).
+            sigterm = signal.getsignal(signal.SIGTERM)
             # "local": a new instance even where another Ray cluster runs on this machine.
             ray.init(address=address or "local", include_dashboard=False, logging_level=logging.WARNING)
+            if sigterm is not None and threading.current_thread() is threading.main_thread():
+                signal.signal(signal.SIGTERM, sigterm)
         self.cfg = cfg
         self.actor_class = ray.remote(num_cpus=1, max_restarts=0)(RolloutWorker)
         self.workers = [self._spawn() for _ in range(num_workers)]

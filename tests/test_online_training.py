@@ -397,3 +397,26 @@ def test_constant_critic_warning_fires_once_below_the_threshold(caplog):
         warn(trainer, {"q_mean": 1.8, "q_std": 1e-6})
     assert len(caplog.records) == 1
     assert "step 700" in caplog.text and "--policy.critic_output_scale=return" in caplog.text
+
+
+def test_sigterm_with_env_worker_processes_stops_cleanly(tmp_path):
+    """SIGTERM with async env workers: one closing line, exit 143, no traceback (the workers are closed,
+    not left to fail on a dead pipe), and the resume state is there."""
+    out = tmp_path / "run"
+    args = [a for a in TINY if not a.startswith(("--online.n_envs", "--online.use_async_envs"))]
+    args += ["--online.n_envs=2", "--online.use_async_envs=true", *ENVS["sawyer_reach"], "--steps=50"]
+    proc = subprocess.run(
+        [sys.executable, "-c", KILLED_AT_CALL, f"--output_dir={out}", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={
+            **_env(),
+            "KILL_AT": "lerobot_indicator.training.online:OnlineTrainer.optimise:3",
+            "KILL_WITH": "SIGTERM",
+        },
+    )
+    assert proc.returncode == 143, proc.stderr[-2000:]
+    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
+    assert "interrupted: the run continues from its resume/ state" in proc.stderr.strip().splitlines()[-1]
+    assert (out / "resume" / "progress.json").exists()

@@ -221,6 +221,22 @@ TASKS: dict[str, TaskPreset] = {
         10,
     ),
 }
+# The authors' observations as far as their public env shows them: RGB only (the paper's 100x100x3), each
+# link its own colour. For measuring whether the learned-reward baselines are exploited there.
+TASKS["rope_rgb_link_colours"] = TaskPreset(
+    [
+        "--env.type=rope_push",
+        "--env.obs_type=rgb",
+        "--env.link_colours=tab20",
+        "--policy.observation_keys=[observation.images.front]",
+        "--policy.spatial_softmax=true",
+    ],
+    2000,
+    40,
+    8,
+    400,
+    10,
+)
 # The same with each 100 px frame area-averaged from a 400 px render (docs/results/rope_framing.json).
 TASKS["rope_rgbd_supersample4"] = TaskPreset(
     [*TASKS["rope_rgbd"].env_args, "--env.camera.supersample=4"], 2000, 40, 8, 400, 10

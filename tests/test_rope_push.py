@@ -260,3 +260,35 @@ def test_lerobot_make_env_gives_documented_keys():
         assert "is_success" in info and "gt_distance" in info
     finally:
         close_envs(envs)
+
+
+def test_link_colours_change_what_the_camera_sees_not_the_physics(cache_file):
+    from lerobot.envs.factory import make_env_config
+
+    from lerobot_indicator.envs.rope_scene import link_geom_name
+
+    with pytest.raises(ValueError, match="link_colours: unknown 'rainbow'"):
+        make_env_config("rope_push", link_colours="rainbow")
+    envs = {}
+    try:
+        for scheme in ("single", "tab20"):
+            cfg = make_env_config(
+                "rope_push",
+                obs_type="rgb",
+                camera=SMALL_CAMERA,
+                cache_path=str(cache_file),
+                link_colours=scheme,
+            )
+            envs[scheme] = gym.make(ROPE_PUSH_ID, **cfg.gym_kwargs).unwrapped
+        obs = {}
+        for scheme, env in envs.items():
+            env.reset(seed=0, options={"cache_index": 0})
+            obs[scheme], *_ = env.step(np.array([-0.5, 0.0, 0.5, 0.1], np.float32))
+            rgba = {tuple(env.model.geom_rgba[env.model.geom(link_geom_name(i)).id]) for i in range(15)}
+            assert len(rgba) == (15 if scheme == "tab20" else 1), scheme
+        assert np.array_equal(obs["single"]["agent_pos"], obs["tab20"]["agent_pos"])
+        differs = (obs["single"]["pixels"]["front"] != obs["tab20"]["pixels"]["front"]).any(axis=-1)
+        assert 0 < differs.mean() < 0.1  # the rope's pixels only
+    finally:
+        for env in envs.values():
+            env.close()

@@ -65,6 +65,7 @@ from lerobot_indicator.data.features import (
 from lerobot_indicator.data.storage import check_depth_range, video_encoders
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 from lerobot_indicator.policy.indicator_core import indicator_reward
+from lerobot_indicator.stop_signals import Interrupted, exit_code
 
 
 @dataclass
@@ -167,12 +168,11 @@ class CorruptFrameError(RecordingError, RuntimeError):
     """An image/video frame file of the episode being saved cannot be read back."""
 
 
-class RecordingInterrupted(KeyboardInterrupt):
+class RecordingInterrupted(Interrupted):
     """Recording stopped by SIGINT/SIGTERM (or Ctrl-C); every committed episode is kept."""
 
     def __init__(self, signum: int = signal.SIGINT):
-        super().__init__(signal.Signals(signum).name)
-        self.signum = int(signum)
+        super().__init__(signum)
         self.target_episodes: int | None = None  # the episode count the run was asked to reach
         self.dropped_episode: int | None = None  # the episode being stepped, if any
 
@@ -699,7 +699,7 @@ def main(cfg: RecordConfig) -> None:
         dataset = record(cfg)
     except KeyboardInterrupt as exc:
         print(interrupted_message(cfg, exc), file=sys.stderr, flush=True)
-        raise SystemExit(128 + getattr(exc, "signum", signal.SIGINT)) from None
+        raise SystemExit(exit_code(exc)) from None
     except RecordingError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         raise SystemExit(1) from None

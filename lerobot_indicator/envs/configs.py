@@ -16,6 +16,7 @@ from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.envs.rope_scene import LINK_COLOURS as ROPE_LINK_COLOURS
 from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
 
 GYM_NAMESPACE = "lerobot_indicator"
@@ -149,7 +150,8 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
     """The paper's RopePush: 3 pushes (x1, y1, x2, y2); success when the 30 link-xy numbers are within
     ``epsilon`` (plain L2, metres) of the goal's. ``end_effector`` bounds are the push region (x, y) and
     the pusher's [pushing, lifted] height (z). ``cache_path``: start/goal pairs from
-    ``scripts/generate_rope_cache.py`` (generated on the fly when unset)."""
+    ``scripts/generate_rope_cache.py`` (generated on the fly when unset). ``link_colours``: "single" (one
+    colour) or "tab20" (each link its own colour, as one version of the authors' env; render-only)."""
 
     task: str | None = ROPE_PUSH_TASK
     fps: int = 2
@@ -161,8 +163,13 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
     epsilon: float = 0.1
     goal_pushes: int = 2
     cache_path: str | None = None
+    link_colours: str = "single"
 
     def __post_init__(self):
+        if self.link_colours not in ROPE_LINK_COLOURS:
+            raise ValueError(
+                f"link_colours: unknown {self.link_colours!r}; expected one of {ROPE_LINK_COLOURS}"
+            )
         if self.epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
         if self.goal_pushes < 1:
@@ -187,6 +194,7 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
             "epsilon": self.epsilon,
             "goal_pushes": self.goal_pushes,
             "cache_path": self.cache_path,
+            "link_colours": self.link_colours,
         }
 
 

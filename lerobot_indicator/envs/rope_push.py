@@ -85,9 +85,12 @@ class RopePushEnv(MujocoGoalEnv):
         epsilon: float = 0.1,
         goal_pushes: int = 2,
         cache_path: str | None = None,
+        link_colours: str = "single",
         **kwargs,
     ):
-        """``kwargs``: :class:`MujocoGoalEnv`'s (obs_type, render_mode, episode_length, eval_reward)."""
+        """``link_colours``: how the rope's links are drawn (``rope_scene.LINK_COLOURS``).
+        ``kwargs``: :class:`MujocoGoalEnv`'s (obs_type, render_mode, episode_length, eval_reward)."""
+        self.link_colours = link_colours
         if isinstance(camera, dict) or camera is None:
             camera = rope_camera_config(**(camera or {}))
         if isinstance(end_effector, dict):
@@ -113,7 +116,9 @@ class RopePushEnv(MujocoGoalEnv):
     def _build_model(self):
         cam = self.camera_cfg
         camera = (cam.name, tuple(cam.pos), tuple(cam.lookat), cam.fovy_deg)
-        return build_rope_model(self.push_config.geometry, camera, self.push_config.timestep)
+        return build_rope_model(
+            self.push_config.geometry, camera, self.push_config.timestep, self.link_colours
+        )
 
     # --- task hooks -----------------------------------------------------------------------------
     def _agent_state(self) -> np.ndarray:

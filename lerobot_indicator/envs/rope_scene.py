@@ -57,6 +57,23 @@ class RopeGeometry:
 
 ROPE_LINK_RGBA = "0.85 0.25 0.1 1"
 PUSHER_RGBA = "0.15 0.15 0.15 1"
+# How the links are coloured: "single" (ROPE_LINK_RGBA for all) or "tab20" (link i in matplotlib's tab20
+# colour i, as the authors' rope env colours its links differently; render-only, the physics is the same).
+LINK_COLOURS = ("single", "tab20")
+
+
+def link_colours_rgba(scheme: str, n_links: int) -> list[tuple[float, float, float, float]]:
+    """One RGBA per link for ``scheme`` (one of :data:`LINK_COLOURS`)."""
+    if scheme == "single":
+        return [tuple(float(v) for v in ROPE_LINK_RGBA.split())] * n_links
+    if scheme == "tab20":
+        from matplotlib import colormaps
+
+        palette = colormaps["tab20"].colors
+        if n_links > len(palette):
+            raise ValueError(f"link_colours 'tab20' has {len(palette)} colours, the rope has {n_links} links")
+        return [(*palette[i], 1.0) for i in range(n_links)]
+    raise ValueError(f"link_colours: unknown {scheme!r}; expected one of {LINK_COLOURS}")
 
 
 def link_geom_name(i: int) -> str:
@@ -112,8 +129,11 @@ def build_rope_model(
     geom: RopeGeometry,
     camera: tuple[str, tuple[float, float, float], tuple[float, float, float], float],
     timestep: float = 0.005,
+    link_colours: str = "single",
 ):
-    """Compile the scene with one fixed camera ``(name, pos, lookat, fovy_deg)`` (the shared camera config)."""
+    """Compile the scene with one fixed camera ``(name, pos, lookat, fovy_deg)`` (the shared camera config)
+    and the links coloured by ``link_colours`` (:data:`LINK_COLOURS`)."""
+    rgba = link_colours_rgba(link_colours, geom.n_links)
     require_robosuite()
     from robosuite.models.arenas import TableArena
     from robosuite.models.world import MujocoWorldBase
@@ -141,4 +161,5 @@ def build_rope_model(
     # moving them to the render group afterwards changes nothing physical.
     for i in range(geom.n_links):
         model.geom_group[model.geom(link_geom_name(i)).id] = RENDER_GROUP
+        model.geom_rgba[model.geom(link_geom_name(i)).id] = rgba[i]
     return model

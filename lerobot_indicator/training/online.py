@@ -33,6 +33,7 @@ from tqdm import tqdm
 
 from lerobot_indicator.finite import NonFiniteError, check_module
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
+from lerobot_indicator.stop_signals import exit_code, raise_interrupted
 from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
@@ -402,19 +403,10 @@ def train(cfg: OnlineTrainConfig) -> dict[str, float]:
         trainer.close()
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (``kill``, a scheduler's preemption) raised in the main thread, so the run stops as on Ctrl-C:
-    the env workers, the recorded dataset and wandb are closed instead of left to die with the process."""
-
-
-def _raise_terminated(signum: int, frame: object) -> None:
-    raise Terminated(signal.Signals(signum).name)
-
-
 def main() -> None:
     init_logging()
     register_third_party_plugins()
-    signal.signal(signal.SIGTERM, _raise_terminated)
+    signal.signal(signal.SIGTERM, raise_interrupted)  # stop as on Ctrl-C: workers, dataset, wandb closed
     try:
         train()
     except NonFiniteError as e:
@@ -427,7 +419,7 @@ def main() -> None:
             "interrupted: the run continues from its resume/ state (the last completed cycle; with --record, the "
             "last dataset checkpoint) with the same command and --resume=true"
         )
-        raise SystemExit(128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)) from None
+        raise SystemExit(exit_code(exc)) from None
 
 
 if __name__ == "__main__":

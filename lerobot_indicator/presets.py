@@ -171,8 +171,8 @@ STYLES = {
     "indicator_balance_filter_calibrated": ("tab:cyan", ":"),
     "indicator_balance_filter_n3_inverse_dynamics_target_q": ("tab:red", "--"),
     "indicator_balance_filter_n3_inverse_dynamics_calibrated": ("tab:red", ":"),
-    "ae": ("black", "-"),
-    "vae": ("black", "--"),
+    "ae": ("tab:gray", "-"),
+    "vae": ("tab:gray", ":"),
     "ae_n3_inverse_dynamics": ("black", "-"),
     "vae_n3_inverse_dynamics": ("black", "--"),
 }

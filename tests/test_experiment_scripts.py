@@ -1,9 +1,13 @@
-"""The experiment helpers: the no-movement reference distance and the comparison plot that draws it."""
+"""The experiment helpers: the no-movement reference distance, the comparison plot that draws it, and the sweep
+runner's stop on a signal or a failed run."""
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -280,3 +284,89 @@ def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):
 
     with pytest.raises(ValueError, match="run_dirs"):
         diagnostics.run(diagnostics.FilterDiagnosticsConfig())
+
+
+FAKE_TRAINER = """#!/usr/bin/env bash
+# A trainer's clean stop takes a moment; a second signal within it is logged again.
+trap 'kill $! 2>/dev/null; echo INT >> "$MARK"; sleep 0.5; exit 130' INT
+trap 'kill $! 2>/dev/null; echo TERM >> "$MARK"; sleep 0.5; exit 143' TERM
+echo started >> "$MARK"
+case "$FAKE_MODE" in
+  crash) exit 1 ;;
+  killed) exit 143 ;;
+  *) sleep 60 </dev/null >/dev/null 2>&1 & wait $! ;;
+esac
+"""
+SWEEP_ARGS = ["--tasks=[reach_state]", "--methods=[oracle]", "--seeds=[0,1]"]
+
+
+def _fake_trainer(tmp_path: Path, monkeypatch, mode: str) -> Path:
+    """A fake ``lerobot-indicator-train`` for the sweep runner; it logs its start and the signals it gets."""
+    bin_dir, mark = tmp_path / "bin", tmp_path / "mark"
+    bin_dir.mkdir()
+    (bin_dir / "lerobot-indicator-train").write_text(FAKE_TRAINER)
+    (bin_dir / "lerobot-indicator-train").chmod(0o755)
+    monkeypatch.setattr(experiments, "BIN", bin_dir)
+    monkeypatch.setenv("MARK", str(mark))
+    monkeypatch.setenv("FAKE_MODE", mode)
+    return mark
+
+
+def _when_started(mark: Path, then) -> threading.Thread:
+    def wait_and_act():
+        deadline = time.monotonic() + 60
+        while not (mark.exists() and "started" in mark.read_text()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        then()
+
+    thread = threading.Thread(target=wait_and_act, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.parametrize(
+    ("mode", "signum", "code", "line"),
+    [
+        ("wait", signal.SIGTERM, 143, "interrupted: rerun the same command"),  # kill of the sweep
+        ("killed", None, 143, "interrupted: rerun the same command"),  # pkill of the trainer itself
+        ("crash", None, 1, "stopped: reach_state/oracle/seed_0 failed with exit code 1"),
+    ],
+)
+def test_sweep_stops_with_one_line_and_the_shells_exit_code(
+    tmp_path, monkeypatch, capsys, mode, signum, code, line
+):
+    mark = _fake_trainer(tmp_path, monkeypatch, mode)
+    cfg = experiments.ExperimentConfig(
+        tasks=["reach_state"],
+        methods=["oracle"],
+        seeds=[0, 1],
+        out=tmp_path / "out",
+        runs_dir=tmp_path / "runs",
+    )
+    handler = signal.getsignal(signal.SIGTERM)
+    if signum is not None:
+        _when_started(mark, lambda: os.kill(os.getpid(), signum))
+    with pytest.raises(SystemExit) as stop:
+        experiments.launch_all(cfg)
+    assert stop.value.code == code
+    assert line in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGTERM) is handler  # the caller's SIGTERM handler is back
+    # The trainer got the signal (forwarded), and the sweep did not go on to seed 1.
+    assert mark.read_text().split() == ["started"] + (["TERM"] if signum else [])
+
+
+def test_ctrl_c_reaches_the_trainer_once_and_the_sweep_exits_without_a_traceback(tmp_path, monkeypatch):
+    """Ctrl-C signals the terminal's whole process group: the trainer must get it once, from the sweep."""
+    mark = _fake_trainer(tmp_path, monkeypatch, "wait")
+    run_sweep = (
+        "import sys; from pathlib import Path; from lerobot_indicator.bench import experiments as e; "
+        "e.BIN = Path(sys.argv[1]); sys.argv = sys.argv[1:]; e.main()"
+    )
+    cmd = [sys.executable, "-c", run_sweep, str(experiments.BIN), *SWEEP_ARGS]
+    cmd += [f"--out={tmp_path / 'out'}", f"--runs_dir={tmp_path / 'runs'}"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    _when_started(mark, lambda: os.killpg(proc.pid, signal.SIGINT)).join(timeout=120)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted: rerun the same command" in err and "Traceback" not in err, err
+    assert mark.read_text().split() == ["started", "INT"]

@@ -13,6 +13,7 @@ import json
 import os
 import platform
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -25,6 +26,7 @@ import matplotlib
 import numpy as np
 
 from lerobot_indicator.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
+from lerobot_indicator.stop_signals import Interrupted, exit_code, raise_interrupted
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -76,6 +78,10 @@ def read_rows(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
 
 
+class RunFailedError(RuntimeError):
+    """One training run of the sweep exited with an error."""
+
+
 def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
     """Run (or resume) one training run; returns its wall time, 0 if it was already complete."""
     preset, out = TASKS[task], run_dir(cfg, task, method, seed)
@@ -106,7 +112,22 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
     print("$ " + shlex.join(cmd), flush=True)
     t0 = time.perf_counter()
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    subprocess.run(cmd, check=True, env=env)
+    # Its own session, so a signal reaches the trainer once, forwarded from here: a terminal's Ctrl-C sent to
+    # both would interrupt the trainer's own clean stop.
+    with subprocess.Popen(cmd, env=env, start_new_session=True) as child:
+        try:
+            code = child.wait()
+        except KeyboardInterrupt as exc:
+            child.send_signal(getattr(exc, "signum", signal.SIGINT))
+            child.wait()
+            raise
+    for signum in (signal.SIGINT, signal.SIGTERM):  # the trainer itself was signalled (e.g. pkill)
+        if code in (128 + signum, -signum):
+            raise Interrupted(signum)
+    if code != 0:
+        raise RunFailedError(
+            f"{task}/{method}/seed_{seed} failed with exit code {code} (its log is above): {out}"
+        )
     return time.perf_counter() - t0
 
 
@@ -335,17 +356,32 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
     return "\n".join(lines)
 
 
-def main() -> None:
-    cfg = draccus.parse(ExperimentConfig)
-    cfg.out.mkdir(parents=True, exist_ok=True)
+def launch_all(cfg: ExperimentConfig) -> dict[str, float]:
+    """Every (task, method, seed) in turn; seeds outermost, so a partial sweep still compares all methods.
+    A signal or a failed run stops the sweep with one line and the shell's exit code; rerunning the same
+    command resumes it."""
     wall = {}
-    if not cfg.plot_only:
-        # Seeds innermost-but-interleaved: every method gets seed 0 before any gets seed 1, so a partial
-        # run still compares all methods.
+    handler = signal.signal(signal.SIGTERM, raise_interrupted)
+    try:
         for task in cfg.tasks:
             for seed in cfg.seeds:
                 for method in cfg.methods:
                     wall[f"{task}/{method}/{seed}"] = launch(cfg, task, method, seed)
+    except KeyboardInterrupt as exc:
+        print("interrupted: rerun the same command to resume the sweep", file=sys.stderr)
+        raise SystemExit(exit_code(exc)) from None
+    except RunFailedError as exc:
+        print(f"stopped: {exc}", file=sys.stderr)
+        raise SystemExit(1) from None
+    finally:
+        signal.signal(signal.SIGTERM, handler)
+    return wall
+
+
+def main() -> None:
+    cfg = draccus.parse(ExperimentConfig)
+    cfg.out.mkdir(parents=True, exist_ok=True)
+    wall = {} if cfg.plot_only else launch_all(cfg)
     runs = {task: collect_runs(cfg, task) for task in cfg.tasks}
     included = include_summaries(runs, cfg.include_summaries, cfg.methods, cfg.seeds)
     summary = {

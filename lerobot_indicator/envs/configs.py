@@ -16,7 +16,7 @@ from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.envs.rope_scene import LINK_COLOURS as ROPE_LINK_COLOURS
+from lerobot_indicator.envs.rope_scene import check_link_colours
 from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
 
 GYM_NAMESPACE = "lerobot_indicator"
@@ -166,10 +166,7 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
     link_colours: str = "single"
 
     def __post_init__(self):
-        if self.link_colours not in ROPE_LINK_COLOURS:
-            raise ValueError(
-                f"link_colours: unknown {self.link_colours!r}; expected one of {ROPE_LINK_COLOURS}"
-            )
+        check_link_colours(self.link_colours)
         if self.epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
         if self.goal_pushes < 1:

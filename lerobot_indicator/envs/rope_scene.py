@@ -62,18 +62,23 @@ PUSHER_RGBA = "0.15 0.15 0.15 1"
 LINK_COLOURS = ("single", "tab20")
 
 
+def check_link_colours(scheme: str) -> None:
+    """Raise one line naming the field when ``scheme`` is not one of :data:`LINK_COLOURS`."""
+    if scheme not in LINK_COLOURS:
+        raise ValueError(f"link_colours: unknown {scheme!r}; expected one of {LINK_COLOURS}")
+
+
 def link_colours_rgba(scheme: str, n_links: int) -> list[tuple[float, float, float, float]]:
     """One RGBA per link for ``scheme`` (one of :data:`LINK_COLOURS`)."""
+    check_link_colours(scheme)
     if scheme == "single":
         return [tuple(float(v) for v in ROPE_LINK_RGBA.split())] * n_links
-    if scheme == "tab20":
-        from matplotlib import colormaps
+    from matplotlib import colormaps  # "tab20"
 
-        palette = colormaps["tab20"].colors
-        if n_links > len(palette):
-            raise ValueError(f"link_colours 'tab20' has {len(palette)} colours, the rope has {n_links} links")
-        return [(*palette[i], 1.0) for i in range(n_links)]
-    raise ValueError(f"link_colours: unknown {scheme!r}; expected one of {LINK_COLOURS}")
+    palette = colormaps["tab20"].colors
+    if n_links > len(palette):
+        raise ValueError(f"link_colours 'tab20' has {len(palette)} colours, the rope has {n_links} links")
+    return [(*palette[i], 1.0) for i in range(n_links)]
 
 
 def link_geom_name(i: int) -> str:

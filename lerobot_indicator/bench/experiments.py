@@ -357,7 +357,8 @@ def table(summary: dict, env_steps: list[int] | None = None, window: int = 5) ->
 
 
 def launch_all(cfg: ExperimentConfig) -> dict[str, float]:
-    """Every (task, method, seed) in turn; seeds outermost, so a partial sweep still compares all methods.
+    """Every (task, method, seed) in turn, each task's seed 0 for every method before any seed 1, so a partial
+    sweep still compares all methods.
     A signal or a failed run stops the sweep with one line and the shell's exit code; rerunning the same
     command resumes it."""
     wall = {}

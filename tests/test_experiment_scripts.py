@@ -358,15 +358,20 @@ def test_sweep_stops_with_one_line_and_the_shells_exit_code(
 def test_ctrl_c_reaches_the_trainer_once_and_the_sweep_exits_without_a_traceback(tmp_path, monkeypatch):
     """Ctrl-C signals the terminal's whole process group: the trainer must get it once, from the sweep."""
     mark = _fake_trainer(tmp_path, monkeypatch, "wait")
+    # SIGINT handled as in a terminal: a test runner started in the background ignores it, and so would its children.
     run_sweep = (
-        "import sys; from pathlib import Path; from lerobot_indicator.bench import experiments as e; "
+        "import signal, sys; from pathlib import Path; from lerobot_indicator.bench import experiments as e; "
+        "signal.signal(signal.SIGINT, signal.default_int_handler); "
         "e.BIN = Path(sys.argv[1]); sys.argv = sys.argv[1:]; e.main()"
     )
     cmd = [sys.executable, "-c", run_sweep, str(experiments.BIN), *SWEEP_ARGS]
     cmd += [f"--out={tmp_path / 'out'}", f"--runs_dir={tmp_path / 'runs'}"]
     proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    _when_started(mark, lambda: os.killpg(proc.pid, signal.SIGINT)).join(timeout=120)
-    _, err = proc.communicate(timeout=120)
+    try:
+        _when_started(mark, lambda: os.killpg(proc.pid, signal.SIGINT)).join(timeout=120)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
     assert proc.returncode == 130, err
     assert "interrupted: rerun the same command" in err and "Traceback" not in err, err
     assert mark.read_text().split() == ["started", "INT"]

@@ -26,3 +26,12 @@ def raise_interrupted(signum: int, frame: object) -> None:
 def exit_code(exc: KeyboardInterrupt) -> int:
     """128 + the signal that stopped the run (a bare ``KeyboardInterrupt`` is Ctrl-C: SIGINT)."""
     return 128 + getattr(exc, "signum", signal.SIGINT)
+
+
+def stopping_signal(returncode: int) -> int | None:
+    """The SIGINT/SIGTERM that stopped a child process with ``returncode`` (its :func:`exit_code`, or Popen's
+    negative signal number when it died of it), else None."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        if returncode in (128 + signum, -signum):
+            return int(signum)
+    return None

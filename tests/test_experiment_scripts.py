@@ -10,6 +10,7 @@ import threading
 import time
 from pathlib import Path
 
+import draccus
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -336,13 +337,8 @@ def test_sweep_stops_with_one_line_and_the_shells_exit_code(
     tmp_path, monkeypatch, capsys, mode, signum, code, line
 ):
     mark = _fake_trainer(tmp_path, monkeypatch, mode)
-    cfg = experiments.ExperimentConfig(
-        tasks=["reach_state"],
-        methods=["oracle"],
-        seeds=[0, 1],
-        out=tmp_path / "out",
-        runs_dir=tmp_path / "runs",
-    )
+    dirs = [f"--out={tmp_path / 'out'}", f"--runs_dir={tmp_path / 'runs'}"]
+    cfg = draccus.parse(experiments.ExperimentConfig, args=[*SWEEP_ARGS, *dirs])
     handler = signal.getsignal(signal.SIGTERM)
     if signum is not None:
         _when_started(mark, lambda: os.kill(os.getpid(), signum))

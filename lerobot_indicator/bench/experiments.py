@@ -26,7 +26,7 @@ import matplotlib
 import numpy as np
 
 from lerobot_indicator.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
-from lerobot_indicator.stop_signals import Interrupted, exit_code, raise_interrupted
+from lerobot_indicator.stop_signals import Interrupted, exit_code, raise_interrupted, stopping_signal
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -121,9 +121,8 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
             child.send_signal(getattr(exc, "signum", signal.SIGINT))
             child.wait()
             raise
-    for signum in (signal.SIGINT, signal.SIGTERM):  # the trainer itself was signalled (e.g. pkill)
-        if code in (128 + signum, -signum):
-            raise Interrupted(signum)
+    if (signum := stopping_signal(code)) is not None:  # the trainer itself was signalled (e.g. pkill)
+        raise Interrupted(signum)
     if code != 0:
         raise RunFailedError(
             f"{task}/{method}/seed_{seed} failed with exit code {code} (its log is above): {out}"

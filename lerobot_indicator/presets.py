@@ -237,6 +237,11 @@ TASKS["rope_rgb_link_colours"] = TaskPreset(
     400,
     10,
 )
+# RGB-D rope push with the pusher in view, resting where its last push ended: whether a visible, directly
+# controlled object in the images changes the ordering of the indicator and the learned-reward baselines.
+TASKS["rope_rgbd_pusher_visible"] = TaskPreset(
+    [*TASKS["rope_rgbd"].env_args, "--env.pusher_rest=push_end"], 2000, 40, 8, 400, 10
+)
 # The same with each 100 px frame area-averaged from a 400 px render (docs/results/rope_framing.json).
 TASKS["rope_rgbd_supersample4"] = TaskPreset(
     [*TASKS["rope_rgbd"].env_args, "--env.camera.supersample=4"], 2000, 40, 8, 400, 10

@@ -292,3 +292,63 @@ def test_link_colours_change_what_the_camera_sees_not_the_physics(cache_file):
     finally:
         for env in envs.values():
             env.close()
+
+
+def test_pusher_rest_shows_where_the_last_push_ended_and_leaves_the_physics(cache_file):
+    from lerobot.envs.factory import make_env_config
+
+    with pytest.raises(ValueError, match="pusher_rest: unknown 'hovering'"):
+        make_env_config("rope_push", pusher_rest="hovering")
+    envs = {}
+    try:
+        for rest in ("out_of_view", "push_end"):
+            cfg = make_env_config(
+                "rope_push",
+                obs_type="rgbd",
+                camera=SMALL_CAMERA,
+                cache_path=str(cache_file),
+                pusher_rest=rest,
+            )
+            envs[rest] = gym.make(ROPE_PUSH_ID, **cfg.gym_kwargs).unwrapped
+        obs = {}
+        for rest, env in envs.items():
+            first, _ = env.reset(seed=0, options={"cache_index": 1})
+            steps = [env.step(action)[0] for action in env.goal_push_actions]
+            obs[rest] = (first, steps)
+        env = envs["push_end"]
+        lift_z = env.sim.config.lift_z
+        end = env.sim.action_to_points(env.goal_push_actions[-1])[1]
+        np.testing.assert_array_equal(env.data.mocap_pos[env.sim.mocap_id], [*end, lift_z])
+        for a, b in zip(obs["out_of_view"][1], obs["push_end"][1], strict=True):
+            assert np.array_equal(a["agent_pos"], b["agent_pos"])  # the resting pusher never touches the rope
+            differs = (a["pixels"]["front"] != b["pixels"]["front"]).any(axis=-1)
+            assert 0 < differs.mean() < 0.1  # the pusher's pixels only
+        for rest, (_, steps) in obs.items():
+            # Replaying the hidden pushes reproduces the goal image, pusher included, bit for bit.
+            last = steps[-1]
+            assert np.array_equal(last["pixels"]["front"], last["pixels"]["goal_front"]), rest
+            assert np.array_equal(last["front_depth"], last["goal_front_depth"]), rest
+        # The start image shows the pusher after the start's random push; a skipped push leaves it there.
+        first = obs["push_end"][0]
+        assert (first["pixels"]["front"] != obs["out_of_view"][0]["pixels"]["front"]).any()
+        skipped, *_ = env.step(NO_OP)
+        assert np.array_equal(skipped["pixels"]["front"], obs["push_end"][1][-1]["pixels"]["front"])
+    finally:
+        for env in envs.values():
+            env.close()
+
+
+def test_pusher_visible_task_preset_builds_the_env_with_the_pusher_in_view():
+    import draccus
+
+    from lerobot_indicator.presets import TASKS
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    args = [
+        "--policy.type=indicator_ddpg",
+        "--policy.push_to_hub=false",
+        *TASKS["rope_rgbd_pusher_visible"].env_args,
+    ]
+    cfg = draccus.parse(OnlineTrainConfig, args=args)
+    assert cfg.env.gym_kwargs["pusher_rest"] == "push_end" and cfg.env.obs_type == "rgbd"
+    assert cfg.env.gym_kwargs["link_colours"] == "single"  # one change from the rope_rgbd task

@@ -16,7 +16,7 @@ from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.envs.rope_scene import check_link_colours
+from lerobot_indicator.envs.rope_scene import check_link_colours, check_pusher_rest
 from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
 
 GYM_NAMESPACE = "lerobot_indicator"
@@ -151,7 +151,9 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
     ``epsilon`` (plain L2, metres) of the goal's. ``end_effector`` bounds are the push region (x, y) and
     the pusher's [pushing, lifted] height (z). ``cache_path``: start/goal pairs from
     ``scripts/generate_rope_cache.py`` (generated on the fly when unset). ``link_colours``: "single" (one
-    colour) or "tab20" (each link its own colour, as one version of the authors' env; render-only)."""
+    colour) or "tab20" (each link its own colour, as one version of the authors' env; render-only).
+    ``pusher_rest``: "out_of_view" (the pusher is parked outside the images) or "push_end" (it rests above
+    the end of the last push, so the images show it; render-only)."""
 
     task: str | None = ROPE_PUSH_TASK
     fps: int = 2
@@ -164,9 +166,11 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
     goal_pushes: int = 2
     cache_path: str | None = None
     link_colours: str = "single"
+    pusher_rest: str = "out_of_view"
 
     def __post_init__(self):
         check_link_colours(self.link_colours)
+        check_pusher_rest(self.pusher_rest)
         if self.epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
         if self.goal_pushes < 1:
@@ -192,6 +196,7 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
             "goal_pushes": self.goal_pushes,
             "cache_path": self.cache_path,
             "link_colours": self.link_colours,
+            "pusher_rest": self.pusher_rest,
         }
 
 

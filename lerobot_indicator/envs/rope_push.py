@@ -6,9 +6,12 @@ gripper's bottom (see :mod:`lerobot_indicator.envs.rope_sim` for the push primit
 
 Start: straight rope plus one random push; goal: ``goal_pushes`` (2) more random pushes, hidden from the
 policy. Pairs come from a cache file (``cache_path``, see :mod:`lerobot_indicator.envs.rope_cache`) or
-are generated on the fly. The pusher is parked outside the camera's view between pushes, so the camera
-and goal images show the table and the rope only; the goal image is rendered by putting the simulator
-in the goal configuration, rendering, and restoring the exact state (:class:`MujocoGoalEnv`).
+are generated on the fly. Between pushes the pusher rests where ``pusher_rest`` says
+(``rope_scene.PUSHER_RESTS``): parked outside the camera's view by default, so the camera and goal images
+show the table and the rope only; or lifted above the end of the last push that ran (the start's random
+push, then the policy's; in the goal image, the last hidden goal push). The goal image is rendered by
+putting the simulator in the goal configuration, rendering, and restoring the exact state
+(:class:`MujocoGoalEnv`).
 
 Observations (besides the shared camera keys): ``agent_pos`` = the 15 link centres xyz (45),
 ``goal_state`` = the same in the goal configuration (45), ``rope_xy`` = link centres xy (30) and its goal
@@ -29,7 +32,7 @@ import numpy as np
 from lerobot_indicator.envs.base import MujocoGoalEnv
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.rope_cache import cache_params, generate_pair, load_cache
-from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model
+from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model, check_pusher_rest
 from lerobot_indicator.envs.rope_sim import PushConfig, RopeSim
 from lerobot_indicator.keys import GOAL_PREFIX
 
@@ -86,11 +89,15 @@ class RopePushEnv(MujocoGoalEnv):
         goal_pushes: int = 2,
         cache_path: str | None = None,
         link_colours: str = "single",
+        pusher_rest: str = "out_of_view",
         **kwargs,
     ):
-        """``link_colours``: how the rope's links are drawn (``rope_scene.LINK_COLOURS``).
+        """``link_colours``: how the rope's links are drawn (``rope_scene.LINK_COLOURS``). ``pusher_rest``:
+        where the pusher waits between pushes (``rope_scene.PUSHER_RESTS``).
         ``kwargs``: :class:`MujocoGoalEnv`'s (obs_type, render_mode, episode_length, eval_reward)."""
+        check_pusher_rest(pusher_rest)
         self.link_colours = link_colours
+        self.pusher_rest = pusher_rest
         if isinstance(camera, dict) or camera is None:
             camera = rope_camera_config(**(camera or {}))
         if isinstance(end_effector, dict):
@@ -113,6 +120,12 @@ class RopePushEnv(MujocoGoalEnv):
         self._goal_actions = np.zeros((0, 4))
         self._measure_goal()
 
+    def _rest_pusher_after(self, action: np.ndarray) -> None:
+        """With ``pusher_rest="push_end"``, show the pusher above the end point of ``action`` (a push that
+        ran); otherwise it stays parked out of view."""
+        if self.pusher_rest == "push_end":
+            self.sim.rest_pusher_above(self.sim.action_to_points(action)[1])
+
     def _build_model(self):
         cam = self.camera_cfg
         camera = (cam.name, tuple(cam.pos), tuple(cam.lookat), cam.fovy_deg)
@@ -134,19 +147,29 @@ class RopePushEnv(MujocoGoalEnv):
             i = int(self.np_random.integers(n)) if i is None else int(i)
             if not 0 <= i < n:
                 raise ValueError(f"reset option cache_index={i} out of range [0, {n})")
-            pair = {k: self.cache[k][i] for k in ("start_qpos", "goal_qpos", "goal_actions")}
+            pair = {k: self.cache[k][i] for k in ("start_qpos", "start_action", "goal_qpos", "goal_actions")}
         elif options.get("cache_index") is not None:
             raise ValueError("reset option cache_index needs an env made with cache_path")
         else:
             pair = generate_pair(self.sim, self.np_random, self.epsilon)
         self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
         self.sim.set_qpos(pair["start_qpos"])
+        self._rest_pusher_after(pair["start_action"])
 
     def _enter_goal_configuration(self) -> None:
         self.sim.set_qpos(self._goal_qpos)
+        # The hidden goal pushes go across a link, so the last one ran and the pusher rests after it.
+        self._rest_pusher_after(self._goal_actions[-1])
 
     def _apply_action(self, action) -> None:
-        self.sim.push(np.asarray(action, dtype=np.float64).reshape(-1))
+        """One push. A skipped push (it cannot touch the rope, or it was undone) leaves the pusher where it
+        was: the arm does not move, as in the authors' env, which skips such pushes."""
+        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        resting = self.data.mocap_pos[self.sim.mocap_id].copy()
+        if self.sim.push(action):
+            self._rest_pusher_after(action)
+        elif self.pusher_rest == "push_end":
+            self.sim.rest_pusher_above(resting[:2])
 
     @property
     def goal_push_actions(self) -> np.ndarray:

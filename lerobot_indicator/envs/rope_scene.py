@@ -68,6 +68,18 @@ def check_link_colours(scheme: str) -> None:
         raise ValueError(f"link_colours: unknown {scheme!r}; expected one of {LINK_COLOURS}")
 
 
+# Where the pusher rests between pushes, so what the camera shows of it: "out_of_view" (parked outside the
+# view: images show the table and the rope only) or "push_end" (lifted above the end point of the last
+# push that ran, as an arm that stays where its push ended; the images then show where the policy pushed).
+PUSHER_RESTS = ("out_of_view", "push_end")
+
+
+def check_pusher_rest(rest: str) -> None:
+    """Raise one line naming the field when ``rest`` is not one of :data:`PUSHER_RESTS`."""
+    if rest not in PUSHER_RESTS:
+        raise ValueError(f"pusher_rest: unknown {rest!r}; expected one of {PUSHER_RESTS}")
+
+
 def link_colours_rgba(scheme: str, n_links: int) -> list[tuple[float, float, float, float]]:
     """One RGBA per link for ``scheme`` (one of :data:`LINK_COLOURS`)."""
     check_link_colours(scheme)

@@ -127,6 +127,12 @@ class RopeSim:
         self.data.qpos[:] = qpos
         self.canonicalize()
 
+    def rest_pusher_above(self, xy: np.ndarray) -> None:
+        """Put the pusher at ``lift_z`` above table point ``xy``: clear of the rope (``lift_z`` is above
+        it), so only what the camera sees changes; :meth:`canonicalize` parks it again."""
+        self.data.mocap_pos[self.mocap_id] = (*np.asarray(xy, float), self.config.lift_z)
+        self._mj.mj_forward(self.model, self.data)
+
     def reset_straight(self) -> None:
         self.set_qpos(self.straight_qpos)
 

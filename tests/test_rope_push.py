@@ -3,7 +3,7 @@ hidden goal pushes are replayable, bad caches fail clearly, and LeRobot's env pa
 
 import json
 import os
-from contextlib import closing
+from contextlib import closing, contextmanager
 
 import numpy as np
 import pytest
@@ -43,6 +43,28 @@ def push_points(env, start, end):
     """Push between table points (metres) through the public action mapping."""
     action = env.sim.points_to_action(np.asarray(start, float), np.asarray(end, float))
     return env.step(action.astype(np.float32))
+
+
+@contextmanager
+def envs_differing_in(field: str, values: tuple[str, ...], cache_file, obs_type: str):
+    """One small-camera env per value of a rope_push config ``field``, built through the env config."""
+    from lerobot.envs.factory import make_env_config
+
+    envs = {}
+    try:
+        for value in values:
+            cfg = make_env_config(
+                "rope_push",
+                obs_type=obs_type,
+                camera=SMALL_CAMERA,
+                cache_path=str(cache_file),
+                **{field: value},
+            )
+            envs[value] = gym.make(ROPE_PUSH_ID, **cfg.gym_kwargs).unwrapped
+        yield envs
+    finally:
+        for env in envs.values():
+            env.close()
 
 
 def joint_gaps(env) -> np.ndarray:
@@ -269,17 +291,7 @@ def test_link_colours_change_what_the_camera_sees_not_the_physics(cache_file):
 
     with pytest.raises(ValueError, match="link_colours: unknown 'rainbow'"):
         make_env_config("rope_push", link_colours="rainbow")
-    envs = {}
-    try:
-        for scheme in ("single", "tab20"):
-            cfg = make_env_config(
-                "rope_push",
-                obs_type="rgb",
-                camera=SMALL_CAMERA,
-                cache_path=str(cache_file),
-                link_colours=scheme,
-            )
-            envs[scheme] = gym.make(ROPE_PUSH_ID, **cfg.gym_kwargs).unwrapped
+    with envs_differing_in("link_colours", ("single", "tab20"), cache_file, obs_type="rgb") as envs:
         obs = {}
         for scheme, env in envs.items():
             env.reset(seed=0, options={"cache_index": 0})
@@ -289,9 +301,6 @@ def test_link_colours_change_what_the_camera_sees_not_the_physics(cache_file):
         assert np.array_equal(obs["single"]["agent_pos"], obs["tab20"]["agent_pos"])
         differs = (obs["single"]["pixels"]["front"] != obs["tab20"]["pixels"]["front"]).any(axis=-1)
         assert 0 < differs.mean() < 0.1  # the rope's pixels only
-    finally:
-        for env in envs.values():
-            env.close()
 
 
 def test_pusher_rest_shows_where_the_last_push_ended_and_leaves_the_physics(cache_file):
@@ -299,17 +308,7 @@ def test_pusher_rest_shows_where_the_last_push_ended_and_leaves_the_physics(cach
 
     with pytest.raises(ValueError, match="pusher_rest: unknown 'hovering'"):
         make_env_config("rope_push", pusher_rest="hovering")
-    envs = {}
-    try:
-        for rest in ("out_of_view", "push_end"):
-            cfg = make_env_config(
-                "rope_push",
-                obs_type="rgbd",
-                camera=SMALL_CAMERA,
-                cache_path=str(cache_file),
-                pusher_rest=rest,
-            )
-            envs[rest] = gym.make(ROPE_PUSH_ID, **cfg.gym_kwargs).unwrapped
+    with envs_differing_in("pusher_rest", ("out_of_view", "push_end"), cache_file, obs_type="rgbd") as envs:
         obs = {}
         for rest, env in envs.items():
             first, _ = env.reset(seed=0, options={"cache_index": 1})
@@ -333,9 +332,6 @@ def test_pusher_rest_shows_where_the_last_push_ended_and_leaves_the_physics(cach
         assert (first["pixels"]["front"] != obs["out_of_view"][0]["pixels"]["front"]).any()
         skipped, *_ = env.step(NO_OP)
         assert np.array_equal(skipped["pixels"]["front"], obs["push_end"][1][-1]["pixels"]["front"])
-    finally:
-        for env in envs.values():
-            env.close()
 
 
 def test_pusher_visible_task_preset_builds_the_env_with_the_pusher_in_view():

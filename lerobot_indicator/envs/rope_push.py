@@ -31,7 +31,7 @@ import numpy as np
 
 from lerobot_indicator.envs.base import MujocoGoalEnv
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
-from lerobot_indicator.envs.rope_cache import cache_params, generate_pair, load_cache
+from lerobot_indicator.envs.rope_cache import ARRAY_KEYS, cache_params, generate_pair, load_cache
 from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model, check_pusher_rest
 from lerobot_indicator.envs.rope_sim import PushConfig, RopeSim
 from lerobot_indicator.keys import GOAL_PREFIX
@@ -120,11 +120,14 @@ class RopePushEnv(MujocoGoalEnv):
         self._goal_actions = np.zeros((0, 4))
         self._measure_goal()
 
-    def _rest_pusher_after(self, action: np.ndarray) -> None:
-        """With ``pusher_rest="push_end"``, show the pusher above the end point of ``action`` (a push that
-        ran); otherwise it stays parked out of view."""
+    def _rest_pusher_at(self, xy: np.ndarray) -> None:
+        """With ``pusher_rest="push_end"``, show the pusher above table point ``xy``; otherwise it stays
+        parked out of view."""
         if self.pusher_rest == "push_end":
-            self.sim.rest_pusher_above(self.sim.action_to_points(action)[1])
+            self.sim.rest_pusher_above(xy)
+
+    def _push_end(self, action: np.ndarray) -> np.ndarray:
+        return self.sim.action_to_points(action)[1]
 
     def _build_model(self):
         cam = self.camera_cfg
@@ -147,29 +150,27 @@ class RopePushEnv(MujocoGoalEnv):
             i = int(self.np_random.integers(n)) if i is None else int(i)
             if not 0 <= i < n:
                 raise ValueError(f"reset option cache_index={i} out of range [0, {n})")
-            pair = {k: self.cache[k][i] for k in ("start_qpos", "start_action", "goal_qpos", "goal_actions")}
+            pair = {k: self.cache[k][i] for k in ARRAY_KEYS}
         elif options.get("cache_index") is not None:
             raise ValueError("reset option cache_index needs an env made with cache_path")
         else:
             pair = generate_pair(self.sim, self.np_random, self.epsilon)
         self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
         self.sim.set_qpos(pair["start_qpos"])
-        self._rest_pusher_after(pair["start_action"])
+        self._rest_pusher_at(self._push_end(pair["start_action"]))
 
     def _enter_goal_configuration(self) -> None:
         self.sim.set_qpos(self._goal_qpos)
         # The hidden goal pushes go across a link, so the last one ran and the pusher rests after it.
-        self._rest_pusher_after(self._goal_actions[-1])
+        self._rest_pusher_at(self._push_end(self._goal_actions[-1]))
 
     def _apply_action(self, action) -> None:
         """One push. A skipped push (it cannot touch the rope, or it was undone) leaves the pusher where it
         was: the arm does not move, as in the authors' env, which skips such pushes."""
         action = np.asarray(action, dtype=np.float64).reshape(-1)
-        resting = self.data.mocap_pos[self.sim.mocap_id].copy()
-        if self.sim.push(action):
-            self._rest_pusher_after(action)
-        elif self.pusher_rest == "push_end":
-            self.sim.rest_pusher_above(resting[:2])
+        resting = self.data.mocap_pos[self.sim.mocap_id, :2].copy()
+        ran = self.sim.push(action)  # an undone push parks the pusher with the restored state
+        self._rest_pusher_at(self._push_end(action) if ran else resting)
 
     @property
     def goal_push_actions(self) -> np.ndarray:

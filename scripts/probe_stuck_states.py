@@ -15,9 +15,8 @@ import draccus
 import torch
 from lerobot.envs.configs import EnvConfig
 
-from lerobot_indicator.bench.policy_probe import stuck_state_probe
+from lerobot_indicator.bench.policy_probe import stuck_state_probe, trained_policies
 from lerobot_indicator.bench.records import write_json
-from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 
 
 @dataclass
@@ -33,12 +32,7 @@ class ProbeConfig:
 def main(cfg: ProbeConfig) -> None:
     torch.set_num_threads(1)
     results = {}
-    for run in sorted(run for runs_dir in cfg.runs_dirs for run in runs_dir.glob("*/seed_*")):
-        path = run / "checkpoints" / "last" / "pretrained_model"
-        if not path.exists():
-            print(f"{run}: no checkpoints/last yet, skipped", flush=True)
-            continue
-        policy = IndicatorDDPGPolicy.from_pretrained(str(path)).to("cpu")
+    for run, policy in trained_policies(cfg.runs_dirs):
         results[str(run)] = r = stuck_state_probe(policy, cfg.env, cfg.episodes)
         print(
             f"{run}: final error per axis {[round(e, 3) for e in r['final_error_abs_mean_m']]} m, critic's best "

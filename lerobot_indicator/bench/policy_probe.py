@@ -15,6 +15,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -37,6 +38,17 @@ def eval_env(policy: IndicatorDDPGPolicy, env_cfg: EnvConfig) -> Iterator[tuple]
         yield vec_env, env_pre
     finally:
         vec_env.close()
+
+
+def trained_policies(runs_dirs: list[Path]) -> Iterator[tuple[Path, IndicatorDDPGPolicy]]:
+    """Every ``<method>/seed_<n>`` run below ``runs_dirs`` with a final checkpoint, and its policy on the CPU;
+    a run without one yet is named and skipped."""
+    for run in sorted(run for runs_dir in runs_dirs for run in Path(runs_dir).glob("*/seed_*")):
+        path = run / "checkpoints" / "last" / "pretrained_model"
+        if not path.exists():
+            print(f"{run}: no checkpoints/last yet, skipped", flush=True)
+            continue
+        yield run, IndicatorDDPGPolicy.from_pretrained(str(path)).to("cpu")
 
 
 def stuck_state_probe(

@@ -69,3 +69,11 @@ def test_a_constant_push_is_measured_against_each_evaluation_goals_last_hidden_p
     assert report["last_push_end_to_goal_pusher_m"] == pytest.approx(np.mean(misses))
     assert report["final_distance_mean"] == pytest.approx(np.mean(distances), abs=1e-5)
     assert 0.05 < report["random_push_end_to_goal_pusher_m"] < 1.0
+
+
+def test_an_env_without_pushes_is_refused_by_name():
+    from lerobot_indicator.envs.configs import SawyerReachEnvConfig
+
+    policy = make_policy({"observation.state": (FeatureType.STATE, (3,))}, horizon=3)
+    with pytest.raises(ValueError, match="needs --env.type=rope_push, got --env.type=sawyer_reach"):
+        pusher_cue_probe(policy, SawyerReachEnvConfig(obs_type="state"))

@@ -1,8 +1,8 @@
 """Whether a rope-push policy aims its pushes at the pusher it sees in the goal image.
 
 With ``--env.pusher_rest=push_end`` the goal image shows the pusher resting where the last hidden goal push
-ended: a 6 x 9 cm palm, a cue far plainer than the 2 cm rope. A policy that ends its own pushes there copies
-the goal's last push rather than reading the rope. This runs the policy greedily on evaluation goals
+ended: a 6 x 9 cm palm, a cue far plainer than the 2 cm rope. A policy that ends its own pushes there uses
+that cue, which says where to push but not how the rope should lie. This runs the policy greedily on evaluation goals
 (``keys.EVAL_SEED_OFFSET`` seeds, the trainer's) and reports how far the end point of each of its pushes is
 from that resting point, beside the same for uniformly random pushes (chance), and the ground-truth final
 rope distance. It runs on either ``pusher_rest``: with the pusher out of view the policy cannot see the
@@ -26,6 +26,8 @@ from lerobot_indicator.training.rollout import env_batch
 def pusher_cue_probe(
     policy: IndicatorDDPGPolicy, env_cfg: EnvConfig, episodes: int = 30, random_pushes: int = 1000
 ) -> dict:
+    if env_cfg.type != "rope_push":
+        raise ValueError(f"the pusher-cue probe needs --env.type=rope_push, got --env.type={env_cfg.type}")
     policy.eval()
     keys = policy.config.observation_keys
     misses, chance, final_distance = [], [], []

@@ -6,8 +6,6 @@
         --out=docs/results/experiments_rope_rgbd/pusher_visible/pusher_cue.json
 """
 
-import shlex
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,9 +13,8 @@ import draccus
 import torch
 from lerobot.envs.configs import EnvConfig
 
-from lerobot_indicator.bench.policy_probe import trained_policies
+from lerobot_indicator.bench.policy_probe import probe_trained_runs
 from lerobot_indicator.bench.pusher_cue import pusher_cue_probe
-from lerobot_indicator.bench.records import write_json
 
 
 @dataclass
@@ -32,15 +29,15 @@ class PusherCueConfig:
 @draccus.wrap()
 def main(cfg: PusherCueConfig) -> None:
     torch.set_num_threads(1)
-    results = {}
-    for run, policy in trained_policies(cfg.runs_dirs):
-        results[str(run)] = r = pusher_cue_probe(policy, cfg.env, cfg.episodes)
-        print(
-            f"{run}: last push ends {r['last_push_end_to_goal_pusher_m']:.3f} m from the goal's pusher "
-            f"(random {r['random_push_end_to_goal_pusher_m']:.3f}), rope distance {r['final_distance_mean']:.3f}",
-            flush=True,
-        )
-    write_json(cfg.out, {"command": shlex.join(["python", *sys.argv]), "runs": results})
+    probe_trained_runs(
+        cfg.runs_dirs,
+        cfg.out,
+        lambda policy: pusher_cue_probe(policy, cfg.env, cfg.episodes),
+        lambda r: (
+            f"last push ends {r['last_push_end_to_goal_pusher_m']:.3f} m from the goal's pusher "
+            f"(random {r['random_push_end_to_goal_pusher_m']:.3f}), rope distance {r['final_distance_mean']:.3f}"
+        ),
+    )
 
 
 if __name__ == "__main__":

@@ -6,8 +6,6 @@ toward the goal there (``lerobot_indicator.bench.policy_probe``).
         --out=docs/results/experiments_rgbd/stuck_states.json
 """
 
-import shlex
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,8 +13,7 @@ import draccus
 import torch
 from lerobot.envs.configs import EnvConfig
 
-from lerobot_indicator.bench.policy_probe import stuck_state_probe, trained_policies
-from lerobot_indicator.bench.records import write_json
+from lerobot_indicator.bench.policy_probe import probe_trained_runs, stuck_state_probe
 
 
 @dataclass
@@ -31,15 +28,15 @@ class ProbeConfig:
 @draccus.wrap()
 def main(cfg: ProbeConfig) -> None:
     torch.set_num_threads(1)
-    results = {}
-    for run, policy in trained_policies(cfg.runs_dirs):
-        results[str(run)] = r = stuck_state_probe(policy, cfg.env, cfg.episodes)
-        print(
-            f"{run}: final error per axis {[round(e, 3) for e in r['final_error_abs_mean_m']]} m, critic's best "
-            f"action stays {[round(x, 2) for x in r['critic_best_stays']]}",
-            flush=True,
-        )
-    write_json(cfg.out, {"command": shlex.join(["python", *sys.argv]), "runs": results})
+    probe_trained_runs(
+        cfg.runs_dirs,
+        cfg.out,
+        lambda policy: stuck_state_probe(policy, cfg.env, cfg.episodes),
+        lambda r: (
+            f"final error per axis {[round(e, 3) for e in r['final_error_abs_mean_m']]} m, critic's best "
+            f"action stays {[round(x, 2) for x in r['critic_best_stays']]}"
+        ),
+    )
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ not at all. Ground truth is used to *measure* only. Also: how saturated a critic
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+import shlex
+import sys
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -24,6 +26,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.envs.factory import make_env_pre_post_processors
 from torch import Tensor
 
+from lerobot_indicator.bench.records import write_json
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
 from lerobot_indicator.training.rollout import env_batch
@@ -49,6 +52,21 @@ def trained_policies(runs_dirs: list[Path]) -> Iterator[tuple[Path, IndicatorDDP
             print(f"{run}: no checkpoints/last yet, skipped", flush=True)
             continue
         yield run, IndicatorDDPGPolicy.from_pretrained(str(path)).to("cpu")
+
+
+def probe_trained_runs(
+    runs_dirs: list[Path],
+    out: Path,
+    probe: Callable[[IndicatorDDPGPolicy], dict],
+    describe: Callable[[dict], str],
+) -> None:
+    """``probe`` every trained run below ``runs_dirs`` (``trained_policies``), print ``describe`` of each
+    result, and write them to ``out`` with the command line that made them."""
+    results = {}
+    for run, policy in trained_policies(runs_dirs):
+        results[str(run)] = result = probe(policy)
+        print(f"{run}: {describe(result)}", flush=True)
+    write_json(out, {"command": shlex.join(["python", *sys.argv]), "runs": results})
 
 
 def stuck_state_probe(

@@ -34,29 +34,24 @@ def pusher_cue_probe(
     with eval_env(policy, env_cfg) as (vec_env, env_pre):
         env = vec_env.envs[0].unwrapped
         rng = np.random.default_rng(0)
-        random_ends = np.stack([push_end(env, a) for a in rng.uniform(-1, 1, (random_pushes, 4))])
+        random_ends = np.stack([env.push_end(a) for a in rng.uniform(-1, 1, (random_pushes, 4))])
         horizon = int(vec_env.call("_max_episode_steps")[0])
         for episode in range(episodes):
             obs, _ = vec_env.reset(seed=EVAL_SEED_OFFSET + episode)
-            goal_rest = push_end(env, env.goal_push_actions[-1])
+            goal_rest = env.push_end(env.goal_push_actions[-1])
             ends = []
             for _ in range(horizon):
                 batch = env_batch(obs, vec_env, env_pre)
                 with torch.no_grad():
                     action = policy.actor({k: batch[k] for k in keys}, {k: batch[goal_key(k)] for k in keys})
                 action = action[0].numpy()
-                ends.append(push_end(env, action))
+                ends.append(env.push_end(action))
                 obs, _, _, _, info = vec_env.step(action[None])
             # Gymnasium's same-step autoreset: the last step's info is final_info.
             final_distance.append(float(info.get("final_info", info)[GT_DISTANCE][0]))
             misses.append(np.linalg.norm(np.stack(ends) - goal_rest, axis=1))
             chance.append(float(np.linalg.norm(random_ends - goal_rest, axis=1).mean()))
     return summarise(np.stack(misses), np.array(chance), np.array(final_distance))
-
-
-def push_end(env, action: np.ndarray) -> np.ndarray:
-    """The table point (x, y) where a rope-push action's push ends: where the pusher then rests."""
-    return env.sim.action_to_points(action)[1]
 
 
 def summarise(misses: np.ndarray, chance: np.ndarray, final_distance: np.ndarray) -> dict:

@@ -126,7 +126,8 @@ class RopePushEnv(MujocoGoalEnv):
         if self.pusher_rest == "push_end":
             self.sim.rest_pusher_above(xy)
 
-    def _push_end(self, action: np.ndarray) -> np.ndarray:
+    def push_end(self, action: np.ndarray) -> np.ndarray:
+        """The table point (x, y) where a push action ends: where the pusher then rests."""
         return self.sim.action_to_points(action)[1]
 
     def _build_model(self):
@@ -157,12 +158,12 @@ class RopePushEnv(MujocoGoalEnv):
             pair = generate_pair(self.sim, self.np_random, self.epsilon)
         self._goal_qpos, self._goal_actions = pair["goal_qpos"].copy(), pair["goal_actions"].copy()
         self.sim.set_qpos(pair["start_qpos"])
-        self._rest_pusher_at(self._push_end(pair["start_action"]))
+        self._rest_pusher_at(self.push_end(pair["start_action"]))
 
     def _enter_goal_configuration(self) -> None:
         self.sim.set_qpos(self._goal_qpos)
         # The hidden goal pushes go across a link, so the last one ran and the pusher rests after it.
-        self._rest_pusher_at(self._push_end(self._goal_actions[-1]))
+        self._rest_pusher_at(self.push_end(self._goal_actions[-1]))
 
     def _apply_action(self, action) -> None:
         """One push. A skipped push (it cannot touch the rope, or it was undone) leaves the pusher where it
@@ -170,7 +171,7 @@ class RopePushEnv(MujocoGoalEnv):
         action = np.asarray(action, dtype=np.float64).reshape(-1)
         resting = self.data.mocap_pos[self.sim.mocap_id, :2].copy()
         ran = self.sim.push(action)  # an undone push parks the pusher with the restored state
-        self._rest_pusher_at(self._push_end(action) if ran else resting)
+        self._rest_pusher_at(self.push_end(action) if ran else resting)
 
     @property
     def goal_push_actions(self) -> np.ndarray:

@@ -2,7 +2,7 @@
 
     python summarize.py OUT.json NAME=RUN_DIR_GLOB [NAME=RUN_DIR_GLOB ...]
 
-A cycle collects 8 episodes (24 env steps) and runs 40 updates; `update_s` and `data_s` are the trainer's own
+A cycle collects episodes and runs updates (here 24 env steps and 40 updates); `update_s` and `data_s` are the trainer's own
 timers (updates; sampling and relabeling the batches), the rest of a cycle's wall time is the rollouts, the
 evaluations every 10 cycles and the replay files. Medians over the cycles after the first 5 (start-up), so a
 resume's gap or a cycle with an evaluation does not move them.
@@ -15,16 +15,18 @@ from itertools import pairwise
 from pathlib import Path
 from statistics import median
 
+from lerobot_indicator.bench.experiments import read_rows
+
 WARMUP_CYCLES = 5
 
 
 def run_stats(metrics: Path) -> dict:
-    rows = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
-    cycles = [r for r in rows if "update_s" in r]
+    cycles = [r for r in read_rows(metrics) if "update_s" in r]
     steady = cycles[WARMUP_CYCLES:]
     wall = median(b["wall_time_s"] - a["wall_time_s"] for a, b in pairwise(steady))
     update = median(r["update_s"] for r in steady[1:])
     data = median(r["data_s"] for r in steady[1:])
+    updates_per_cycle = median(b["step"] - a["step"] for a, b in pairwise(steady))
     last = cycles[-1]
     return {
         "run": str(metrics.parent),
@@ -38,7 +40,7 @@ def run_stats(metrics: Path) -> dict:
             "data": data,
             "rollouts_eval_io": wall - update - data,
         },
-        "updates_per_s": 40 / wall,
+        "updates_per_s": updates_per_cycle / wall,
     }
 
 

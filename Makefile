@@ -50,7 +50,7 @@ MUTATION_JOBS ?= 2
 mutation: install
 	$(PY) -m pip install -q --disable-pip-version-check -e '.[mutation]'
 	OMP_NUM_THREADS=1 $(VENV)/bin/mutmut run --max-children $(MUTATION_JOBS)
-	$(PY) scripts/mutation_report.py
+	$(PY) -m benchmarks.mutation.run
 
 clean:
 	rm -rf $(VENV) outputs mutants .pytest_cache .ruff_cache

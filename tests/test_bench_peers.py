@@ -1,4 +1,4 @@
-"""``lerobot_indicator.bench.peers``: LeRobot's SAC update really trains, and its FLOP count scales with batch;
+"""``benchmarks.speed.peers``: LeRobot's SAC update really trains, and its FLOP count scales with batch;
 the update timer and the records' commit."""
 
 import mmap
@@ -8,9 +8,9 @@ import pytest
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from lerobot_indicator.bench.peers import make_sac_update, matmul_conv_flops, measure_peaks
-from lerobot_indicator.bench.records import git_commit
-from lerobot_indicator.bench.updates import interleaved_rates
+from benchmarks.records import git_commit
+from benchmarks.speed.peers import make_sac_update, matmul_conv_flops, measure_peaks
+from benchmarks.speed.updates import interleaved_rates
 
 # The smallest square image LeRobot's DefaultImageEncoder (four unpadded stride-2 convs) accepts is 40x40.
 SHAPE = (4, 40, 40)
@@ -73,7 +73,7 @@ def test_fused_conv_relu_counts_the_flops_of_the_plain_conv():
 
 
 def test_unfused_arm_runs_plain_convs_and_the_default_runs_fused_ones():
-    from lerobot_indicator.bench.peers import without_fused_conv_relu
+    from benchmarks.speed.peers import without_fused_conv_relu
     from lerobot_indicator.policy.networks_indicator_ddpg import conv_relu
 
     x = torch.randn(2, 4, 9, 9).contiguous(memory_format=torch.channels_last)

@@ -1,4 +1,4 @@
-"""The SB3 GoalEnv adapter of ``scripts/bench_vs_sb3.py``: vectorised reward and a few SB3 DDPG+HER steps."""
+"""The SB3 GoalEnv adapter of ``benchmarks/experiments/run_vs_sb3.py``: vectorised reward and a few SB3 DDPG+HER steps."""
 
 import numpy as np
 import pytest
@@ -88,7 +88,7 @@ def test_sb3_ddpg_her_runs_on_the_reach_env():
 
 
 def test_eval_curve_hooks_exclude_evaluation_time(monkeypatch):
-    from lerobot_indicator.bench import vs_sb3
+    from benchmarks.experiments import vs_sb3
     from lerobot_indicator.training.hooks import PhaseEnd
 
     clock = iter([10.0, 15.0, 30.0])  # first cycle start, first eval end, second eval end
@@ -108,8 +108,8 @@ def test_eval_curve_hooks_exclude_evaluation_time(monkeypatch):
 
 
 def test_our_learners_are_the_package_presets(tmp_path):
-    from lerobot_indicator.bench import vs_sb3
-    from lerobot_indicator.presets import METHODS
+    from benchmarks.experiments import vs_sb3
+    from benchmarks.experiments.presets import METHODS
 
     s = vs_sb3.Settings(env_steps=500, eval_every=250)
     for learner, preset in vs_sb3.OURS.items():

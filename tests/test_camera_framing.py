@@ -7,7 +7,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from lerobot_indicator.bench import framing
+from benchmarks.probes import framing
 from lerobot_indicator.envs.hardware import GoalCameraConfig
 from lerobot_indicator.envs.rendering import area_downsample, metres_to_uint16_mm
 from lerobot_indicator.envs.rope_push import TABLE_TOP_Z, RopePushEnv
@@ -131,7 +131,7 @@ def test_framing_statistics_and_probe_run_on_collected_states():
 def test_supersampled_rope_task_preset_keeps_the_observation_size():
     import draccus
 
-    from lerobot_indicator.presets import TASKS
+    from benchmarks.experiments.presets import TASKS
     from lerobot_indicator.training.config import OnlineTrainConfig
 
     args = [

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy
+from benchmarks.speed.updates import STATE_FEATURES, make_policy
 from lerobot_indicator.policy import modeling_indicator_ddpg
 
 FAULTS_OF_A_REALLOCATION = """

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from lerobot_indicator.bench.critic_fit import fit_critic
+from benchmarks.probes.critic_fit import fit_critic
 
 
 def fake_run(tmp_path, episodes: int = 8, horizon: int = 5, size: int = 24):
@@ -43,7 +43,7 @@ def test_state_critic_fits_and_the_image_path_reads_the_same_episodes(tmp_path):
 
 
 def test_localization_probe_reports_a_test_error_curve(tmp_path):
-    from lerobot_indicator.bench.critic_fit import localization_probe
+    from benchmarks.probes.critic_fit import localization_probe
 
     run = fake_run(tmp_path, episodes=30)
     probe = localization_probe(run, 20, 24, horizon=5, batch_size=16, every=10, hidden_dims=[8])
@@ -56,8 +56,8 @@ def test_feature_probe_finds_a_linear_position_and_none_in_noise(tmp_path):
     them, no better than the spread where it is unrelated noise."""
     import torch
 
-    from lerobot_indicator.bench.critic_fit import feature_probe
-    from lerobot_indicator.bench.updates import make_policy, rgbd_features
+    from benchmarks.probes.critic_fit import feature_probe
+    from benchmarks.speed.updates import make_policy, rgbd_features
 
     episodes, horizon, size = 30, 5, 24
     run = fake_run(tmp_path, episodes=episodes, horizon=horizon, size=size)

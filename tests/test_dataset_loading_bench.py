@@ -1,10 +1,10 @@
-"""The frame-equality count behind the video-storage measurements (lerobot_indicator/bench/dataset_loading.py)."""
+"""The frame-equality count behind the video-storage measurements (benchmarks/speed/dataset_loading.py)."""
 
 from types import SimpleNamespace
 
 import torch
 
-from lerobot_indicator.bench.dataset_loading import equality_errors
+from benchmarks.speed.dataset_loading import equality_errors
 
 KEY, GOAL = "observation.images.front", "observation.images.goal_front"
 
@@ -45,7 +45,7 @@ def test_single_threaded_decode_arm_decodes_the_frames_lerobot_returns(tmp_path)
     import numpy as np
     from lerobot.datasets.video_utils import decode_video_frames_pyav
 
-    from lerobot_indicator.bench.dataset_loading import decode_single_threaded
+    from benchmarks.speed.dataset_loading import decode_single_threaded
 
     path, fps = tmp_path / "v.mp4", 20
     with av.open(str(path), "w") as out:
@@ -68,7 +68,7 @@ def test_single_threaded_decode_arm_decodes_the_frames_lerobot_returns(tmp_path)
 
 
 def test_loading_floor_compares_the_reader_floor_spread_over_every_core_with_the_update(monkeypatch):
-    from lerobot_indicator.bench import offline_throughput
+    from benchmarks.speed import offline_throughput
 
     monkeypatch.setattr(offline_throughput.os, "cpu_count", lambda: 2)
     getitem = {offline_throughput.ONE_FRAME: {"samples_per_s": 50.0}}  # 20 ms per sample
@@ -85,7 +85,7 @@ def test_loading_floor_compares_the_reader_floor_spread_over_every_core_with_the
 def test_train_run_spec_turns_start_method_and_decoder_threads_into_lerobot_train_flags():
     import pytest
 
-    from lerobot_indicator.bench.offline_throughput import train_run_spec
+    from benchmarks.speed.offline_throughput import train_run_spec
 
     assert train_run_spec("video:3") == ("video", 3, [], "video_workers3")
     assert train_run_spec("video:3:fork") == (

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 import lerobot_indicator  # noqa: F401  (registers the gym ids)
-from lerobot_indicator.bench import experiments
-from lerobot_indicator.bench.policy_probe import clipped_goal_dims
+from benchmarks.experiments import runner as experiments
+from benchmarks.probes.policy_probe import clipped_goal_dims
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,7 +27,8 @@ def test_start_distance_is_the_eval_goals_distance_at_reset(tmp_path):
     out = tmp_path / "start_distance_reach_state.json"
     cmd = [
         sys.executable,
-        "scripts/start_distance.py",
+        "-m",
+        "benchmarks.experiments.start_distance",
         "--env.type=sawyer_reach",
         "--episodes=2",
         f"--out={out}",
@@ -111,7 +112,7 @@ def test_eval_goals_on_a_trained_checkpoint(trained_run, tmp_path):
     env_args, env = REACH_ARGS, SCRIPT_ENV
     out = tmp_path / "eval_goals.json"
     policy_path = trained_run / "checkpoints" / "last" / "pretrained_model"
-    cmd = [sys.executable, "scripts/eval_goals.py", *env_args, f"--policy_path={policy_path}", "--episodes=2"]
+    cmd = [sys.executable, "-m", "benchmarks.probes.run_eval_goals", *env_args, f"--policy_path={policy_path}", "--episodes=2"]
     subprocess.run([*cmd, f"--out={out}"], cwd=ROOT, check=True, env=env, capture_output=True)
     record = json.loads(out.read_text())
     assert [r["seed"] for r in record["episodes"]] == [EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + 1]
@@ -262,7 +263,7 @@ def test_included_summaries_merge_seed_by_seed(tmp_path):
 def test_filter_diagnostics_counts_by_goal_source(trained_run, tmp_path):
     """Per-source counts add up, o_{t+1} goals are always indicator and ground-truth positives, recorded goals
     are never indicator positives here, and what the filter drops is a subset of the R- transitions."""
-    from lerobot_indicator.bench import filter_diagnostics as diagnostics
+    from benchmarks.probes import filter_diagnostics as diagnostics
 
     cfg = diagnostics.FilterDiagnosticsConfig(
         run_dirs=[trained_run], batches=3, batch_size=64, out=tmp_path / "fd.json"
@@ -356,7 +357,7 @@ def test_ctrl_c_reaches_the_trainer_once_and_the_sweep_exits_without_a_traceback
     mark = _fake_trainer(tmp_path, monkeypatch, "wait")
     # SIGINT handled as in a terminal: a test runner started in the background ignores it, and so would its children.
     run_sweep = (
-        "import signal, sys; from pathlib import Path; from lerobot_indicator.bench import experiments as e; "
+        "import signal, sys; from pathlib import Path; from benchmarks.experiments import runner as e; "
         "signal.signal(signal.SIGINT, signal.default_int_handler); "
         "e.BIN = Path(sys.argv[1]); sys.argv = sys.argv[1:]; e.main()"
     )

@@ -6,7 +6,7 @@ import pytest
 import torch
 from test_indicator_core import state_config, transition_batch
 
-from lerobot_indicator.bench.updates import make_batch, make_policy, rgbd_features
+from benchmarks.speed.updates import make_batch, make_policy, rgbd_features
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfigError
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy

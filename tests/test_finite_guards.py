@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from lerobot_indicator.bench.updates import STATE_FEATURES, make_batch, make_policy
+from benchmarks.speed.updates import STATE_FEATURES, make_batch, make_policy
 from lerobot_indicator.finite import NonFiniteError, check_episode, check_module
 
 STATE = "observation.state"

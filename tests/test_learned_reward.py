@@ -8,7 +8,7 @@ import pytest
 import torch
 from lerobot.configs import FeatureType
 
-from lerobot_indicator.bench.updates import make_batch, make_policy, policy_update, rgbd_features
+from benchmarks.speed.updates import make_batch, make_policy, policy_update, rgbd_features
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy import learned_reward as lr
@@ -230,7 +230,7 @@ def test_short_online_rope_rgbd_run_trains_and_reloads_the_reward_model(tmp_path
     for name, value in loaded.reward_model.state_dict().items():
         torch.testing.assert_close(value, model_state[name])
 
-    from lerobot_indicator.bench import learned_reward_probe as probe
+    from benchmarks.probes import learned_reward as probe
 
     cfg = probe.LearnedRewardProbeConfig(
         run_dirs=[tmp_path / "run"], last_cycles=1, pairs=12, out=tmp_path / "p.json"
@@ -244,8 +244,8 @@ def test_short_online_rope_rgbd_run_trains_and_reloads_the_reward_model(tmp_path
 def test_every_method_arm_has_a_label_a_style_and_valid_policy_flags():
     import draccus
 
+    from benchmarks.experiments.presets import LABELS, METHODS, STYLES
     from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
-    from lerobot_indicator.presets import LABELS, METHODS, STYLES
 
     assert set(METHODS) == set(LABELS) == set(STYLES)
     assert METHODS["ae"] == ["--policy.reward=ae", "--policy.balance=false", "--policy.filter=false"]
@@ -280,7 +280,7 @@ def _probe_episodes(n_ep: int, size: int = 8) -> dict:
 def test_learned_reward_probe_ranks_a_reward_against_ground_truth_distance(sign):
     """A reward equal to minus the ground-truth distance ranks it perfectly (Spearman 1, AUC 1, on-policy
     reward = -distance); the same reward with the sign flipped ranks it exactly backwards."""
-    from lerobot_indicator.bench import learned_reward_probe as probe
+    from benchmarks.probes import learned_reward as probe
 
     policy, _ = policy_and_batch("ae")
 

@@ -40,8 +40,8 @@ from test_learning_math import (
 )
 from torch import Tensor, nn
 
-from lerobot_indicator.bench.updates import make_batch
-from lerobot_indicator.bench.updates import make_policy as make_image_policy
+from benchmarks.speed.updates import make_batch
+from benchmarks.speed.updates import make_policy as make_image_policy
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy

@@ -90,7 +90,7 @@ def test_two_process_lerobot_train_trains_saves_and_evaluates(tmp_path: Path):
 
 
 def test_loss_curve_benchmark_reads_lerobot_train_log_lines():
-    from lerobot_indicator.bench.ddp_loss import parse_losses, window_means
+    from benchmarks.experiments.ddp_loss import parse_losses, window_means
 
     log = (
         "INFO ot_train.py:641 step:2 smpl:16 ep:2 epch:0.76 loss:7.938 grdn:2.835 lr:1.0e-03 updt_s:0.042 "

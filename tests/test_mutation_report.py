@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("mutmut")
 
-from lerobot_indicator.bench.mutation_report import mutation_report  # noqa: E402
+from benchmarks.mutation.report import mutation_report  # noqa: E402
 
 CORE = "pkg/core.py"
 

@@ -3,8 +3,8 @@
 import torch
 from torch import nn
 
-from lerobot_indicator.bench.policy_probe import stuck_state_probe
-from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy
+from benchmarks.probes.policy_probe import stuck_state_probe
+from benchmarks.speed.updates import STATE_FEATURES, make_policy
 from lerobot_indicator.envs.configs import SawyerReachEnvConfig
 
 
@@ -36,7 +36,7 @@ def test_critic_saturation_reads_a_saturated_layer_and_a_constant_q():
     """hidden_dims=[3, 2]: with the second layer's bias at +100 both its units sit at tanh(100) = 1 for every
     input (saturated fraction 1, std 0) and Q = w . 1 + b is the same for every row and action; with a zero
     bias that layer follows the input and Q varies."""
-    from lerobot_indicator.bench.policy_probe import critic_saturation, env_frames
+    from benchmarks.probes.policy_probe import critic_saturation, env_frames
 
     env = SawyerReachEnvConfig(obs_type="state", episode_length=4)
     policy = make_policy(STATE_FEATURES, horizon=4, hidden_dims=[3, 2])

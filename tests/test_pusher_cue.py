@@ -13,8 +13,8 @@ import gymnasium as gym  # noqa: E402
 import torch  # noqa: E402
 from lerobot.configs import FeatureType  # noqa: E402
 
-from lerobot_indicator.bench.pusher_cue import pusher_cue_probe, summarise  # noqa: E402
-from lerobot_indicator.bench.updates import make_policy  # noqa: E402
+from benchmarks.probes.pusher_cue import pusher_cue_probe, summarise  # noqa: E402
+from benchmarks.speed.updates import make_policy  # noqa: E402
 from lerobot_indicator.envs import ROPE_PUSH_ID  # noqa: E402
 from lerobot_indicator.envs import rope_cache as rc  # noqa: E402
 from lerobot_indicator.envs.configs import RopePushEnvConfig  # noqa: E402

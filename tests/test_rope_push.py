@@ -337,7 +337,7 @@ def test_pusher_rest_shows_where_the_last_push_ended_and_leaves_the_physics(cach
 def test_pusher_visible_task_preset_builds_the_env_with_the_pusher_in_view():
     import draccus
 
-    from lerobot_indicator.presets import TASKS
+    from benchmarks.experiments.presets import TASKS
     from lerobot_indicator.training.config import OnlineTrainConfig
 
     args = [

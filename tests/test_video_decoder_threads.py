@@ -10,7 +10,7 @@ import pytest
 import torch
 from lerobot.datasets.video_utils import decode_video_frames_pyav
 
-from lerobot_indicator.bench.updates import STATE_FEATURES, make_policy
+from benchmarks.speed.updates import STATE_FEATURES, make_policy
 from lerobot_indicator.data.video_decoder_threads import ffmpeg_cores, set_video_decoder_threads
 from lerobot_indicator.policy.configuration_indicator_ddpg import (
     IndicatorDDPGConfig,

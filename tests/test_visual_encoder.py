@@ -7,7 +7,7 @@ import torch
 import torch.nn.functional as F
 from test_indicator_core import _losses
 
-from lerobot_indicator.bench.updates import STATE_FEATURES, make_batch, make_policy, rgbd_features
+from benchmarks.speed.updates import STATE_FEATURES, make_batch, make_policy, rgbd_features
 from lerobot_indicator.policy import indicator_core as core
 from lerobot_indicator.policy import networks_indicator_ddpg as networks
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfigError

@@ -1,7 +1,7 @@
 """Our state-based goal envs as the ``Dict(observation, achieved_goal, desired_goal)`` GoalEnv that
 Stable-Baselines3's ``HerReplayBuffer`` (and gymnasium-robotics' Fetch tasks) expect.
 
-Used by ``scripts/bench_vs_sb3.py`` to run SB3 DDPG/TD3 + HER on the very same simulator. SB3 relabels goals
+Used by ``benchmarks/experiments/run_vs_sb3.py`` to run SB3 DDPG/TD3 + HER on the very same simulator. SB3 relabels goals
 itself and asks the env for rewards through a *vectorised* ``compute_reward(achieved, desired, info)``; this
 one is the ground-truth sparse reward the env's ``step`` returns and our ``reward=oracle`` baseline uses:
 +1 when ``||achieved - desired|| <= epsilon``, else -1 (SB3 uses the reward as given, so keeping the env's

@@ -21,7 +21,7 @@ mkdir -p logs; python3 docs/results/experiments_rope_rgbd/gpu_lease/probe.py > l
 grep -v -i "warning\|robosuite\|macro" logs/probe.log; [ $rc -eq 0 ] || exit 5
 E="--extra_args=[--env.cache_path=outputs/rope_cache/rope_push_10k.npz,--online.batch_size=64]"
 for s in $SEEDS; do for m in indicator_balance_filter indicator; do
-  python3 scripts/experiments.py --tasks='[rope_rgbd]' --methods="[${m}_n3_inverse_dynamics]" --seeds="[$s]" \
+  python3 -m benchmarks.experiments.run --tasks='[rope_rgbd]' --methods="[${m}_n3_inverse_dynamics]" --seeds="[$s]" \
     --steps=20000 --device=cuda --n_envs=4 --out=outputs/gpu/agg_${m}_s$s --runs_dir=outputs/gpu/runs "$E" \
     > logs/${m}_s$s.log 2>&1 &
 done; done

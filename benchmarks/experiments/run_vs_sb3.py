@@ -1,0 +1,42 @@
+"""Side-by-side benchmark: Stable-Baselines3 DDPG + HER vs our online trainer on the state-based Sawyer reach.
+
+The learners, protocol and timing are ``benchmarks.experiments.vs_sb3``'s; this CLI picks seeds, budget
+and output. Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``).
+
+    python -m benchmarks.experiments.run_vs_sb3 [--seeds 0 1 2] [--env-steps 5000] [--eval-every 250] [--threads 1]
+"""
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+
+from benchmarks.experiments.vs_sb3 import LEARNERS, Settings, run_benchmark
+from benchmarks.records import command_line
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--methods", nargs="+", default=list(LEARNERS), choices=LEARNERS)
+    for f in dataclasses.fields(Settings):
+        flag = "--" + f.name.replace("_", "-")
+        if f.type == "bool":
+            p.add_argument(flag, action="store_true")
+        else:
+            p.add_argument(flag, type={"int": int, "float": float}[f.type], default=f.default)
+    p.add_argument("--skip-training", action="store_true", help="only the update-throughput benchmark")
+    p.add_argument("--out-dir", type=Path, default=Path("docs/results"))
+    args = p.parse_args()
+    settings = Settings(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Settings)})
+    try:
+        settings.validate()
+    except ValueError as e:
+        p.error(str(e))
+    command = command_line()
+    record = run_benchmark(args.seeds, args.methods, settings, args.out_dir, command, args.skip_training)
+    print(json.dumps(record["summary"], indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,575 @@
+"""Side by side: Stable-Baselines3 DDPG + HER and our online trainer on the state-based Sawyer reach.
+
+Three learners, same simulator, same hyper-parameters where both have them (3x256 tanh MLPs, batch 256,
+Adam lr 1e-3, gamma = 1 - 1/T = 0.96, target smoothing 0.98 (SB3 tau 0.02), one env, the same episodes and
+gradient steps per cycle, the same env-step budget):
+
+* ``sb3_ddpg_her``: SB3 ``DDPG`` + ``HerReplayBuffer`` (``future``, 4 sampled goals), ground-truth sparse
+  reward +1/-1 through ``GoalEnvAdapter.compute_reward`` (``lerobot_indicator/envs/goal_env_adapter.py``);
+* ``ours_oracle``: the ``oracle`` preset (``benchmarks.experiments.presets``: ground-truth reward, HER-style
+  relabeling);
+* ``ours_indicator``: the ``indicator_balance_filter`` preset (no ground truth).
+
+Evaluation is the same for all: the deterministic actor on the N fixed eval episodes of our trainer
+(``reset(seed=EVAL_SEED_OFFSET + i)``), success = ground-truth distance <= epsilon at the last step. Our
+runs are timed through ``TrainerHooks``; wall-clock excludes evaluation. Update throughput is measured in
+one process on equally filled buffers, blocks interleaved with the order of the arms rotating.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+from benchmarks.experiments.presets import METHODS, TASKS
+from benchmarks.records import REPO, cpu_model
+from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
+from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
+
+# What differs between the SB3 and our learners beyond the shared hyper-parameters (each library's defaults).
+PROTOCOL_DIFFERENCES = [
+    "inputs: SB3 concatenates observation, achieved_goal (== observation) and desired_goal (9-d); ours "
+    "observation and goal (6-d)",
+    "exploration: SB3 Gaussian noise std 0.2; ours Gaussian 0.2 plus a uniform random action with p=0.3 "
+    "(baselines' HER)",
+    "losses: ours adds action_l2=1 on the actor output and clips TD targets to [R-/(1-gamma), R+/(1-gamma)], "
+    "critic bias initialised at R-/(1-gamma); SB3 has neither",
+    "relabeling: SB3 'future' with 4 sampled goals (80% relabeled); ours oracle HER-style p=0.9 uniform over "
+    "{t+1..T}; ours indicator balanced 0.45 next / 0.45 future (t'>=t+2) / 0.1 recorded, plus filtering",
+    "input normalisation: ours mean/std of the replay buffer's frames and goals, refreshed every cycle, "
+    "clipped to +-5 (baselines' HER); SB3 none",
+    "optimiser: SB3 one Adam per network (critic step then actor step); ours one Adam over both, one backward",
+    "ours writes its resume state (weights, optimizer, new episodes) after every cycle; that time counts",
+]
+# Our learners: the package's method presets.
+OURS = {"ours_oracle": "oracle", "ours_indicator": "indicator_balance_filter"}
+LEARNERS = ("sb3_ddpg_her", *OURS)
+TASK = "reach_state"
+HORIZON = 25
+SUCCESS_TARGET = 0.9
+
+
+@dataclass
+class Settings:
+    """What every learner and the update benchmark share."""
+
+    env_steps: int = 5000  # env-step budget per run
+    eval_every: int = 250  # env steps between evaluations
+    eval_episodes: int = 20
+    episodes_per_cycle: int = 2
+    updates_per_cycle: int = 40
+    batch_size: int = 256
+    lr: float = 1e-3
+    noise: float = 0.2  # Gaussian action noise std (both libraries)
+    threads: int = 1  # torch threads in every process
+    compile: bool = False  # ours with --policy.compile_model=true (training runs and an extra update arm)
+    fill_episodes: int = 40  # update benchmark: episodes in the buffers
+    updates_per_block: int = 50
+    update_blocks: int = 6
+
+    def validate(self) -> None:
+        cycle_steps = self.episodes_per_cycle * HORIZON
+        if self.eval_every % cycle_steps or self.env_steps % cycle_steps:
+            raise ValueError(
+                f"eval_every ({self.eval_every}) and env_steps ({self.env_steps}) must be multiples of one "
+                f"cycle ({cycle_steps} env steps)"
+            )
+
+    def steps(self) -> int:
+        """Our optimisation steps for the env-step budget."""
+        return self.env_steps * self.updates_per_cycle // (self.episodes_per_cycle * HORIZON)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# SB3 side
+# ----------------------------------------------------------------------------------------------------------
+def make_sb3(seed: int, s: Settings, learning_starts: int = 0):
+    from stable_baselines3 import DDPG, HerReplayBuffer
+    from stable_baselines3.common.noise import NormalActionNoise
+    from torch import nn
+
+    from lerobot_indicator.envs.goal_env_adapter import make_goal_env
+
+    return DDPG(
+        "MultiInputPolicy",
+        make_goal_env(),
+        learning_rate=s.lr,
+        buffer_size=1_000_000,
+        learning_starts=learning_starts,
+        batch_size=s.batch_size,
+        tau=0.02,
+        gamma=1 - 1 / HORIZON,
+        train_freq=(s.episodes_per_cycle, "episode"),
+        gradient_steps=s.updates_per_cycle,
+        action_noise=NormalActionNoise(np.zeros(3), s.noise * np.ones(3)),
+        replay_buffer_class=HerReplayBuffer,
+        replay_buffer_kwargs={"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+        policy_kwargs={"net_arch": [256, 256, 256], "activation_fn": nn.Tanh},
+        seed=seed,
+        device="cpu",
+        verbose=0,
+    )
+
+
+def evaluate_sb3(model, env, n_episodes: int) -> dict[str, float]:
+    """Our trainer's evaluation protocol: seeds EVAL_SEED_OFFSET + i, deterministic actor, success at step T."""
+    success, distance = [], []
+    for i in range(n_episodes):
+        obs, info = env.reset(seed=EVAL_SEED_OFFSET + i)
+        for _ in range(HORIZON):
+            action, _ = model.predict(obs, deterministic=True)
+            obs, _, terminated, truncated, info = env.step(action)
+        if not truncated:
+            raise RuntimeError("an eval episode did not end at the horizon")
+        success.append(bool(info["is_success"]))
+        distance.append(float(info[GT_DISTANCE]))
+    return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
+
+
+def run_sb3(seed: int, s: Settings) -> dict:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from lerobot_indicator.envs.goal_env_adapter import make_goal_env
+
+    model = make_sb3(seed, s)
+    eval_env = make_goal_env()
+    curve: list[dict] = []
+    clock = {"eval": 0.0, "collect": 0.0, "rollout_t0": 0.0, "start": 0.0}
+
+    def do_eval() -> None:
+        t0 = time.perf_counter()
+        train_wall = t0 - clock["start"] - clock["eval"]
+        result = evaluate_sb3(model, eval_env, s.eval_episodes)
+        clock["eval"] += time.perf_counter() - t0
+        curve.append(
+            {
+                "env_steps": int(model.num_timesteps),
+                "updates": int(model._n_updates),
+                "train_wall_s": train_wall,
+                **result,
+            }
+        )
+
+    class Timer(BaseCallback):
+        """Rollout start = the previous cycle's gradient steps are done: evaluate there (as ours does)."""
+
+        def _on_training_start(self) -> None:
+            clock["start"] = time.perf_counter()
+
+        def _on_rollout_start(self) -> None:
+            n = self.model.num_timesteps
+            if n > 0 and n % s.eval_every == 0 and (not curve or curve[-1]["env_steps"] != n):
+                do_eval()
+            clock["rollout_t0"] = time.perf_counter()
+
+        def _on_rollout_end(self) -> None:
+            clock["collect"] += time.perf_counter() - clock["rollout_t0"]
+
+        def _on_step(self) -> bool:
+            return True
+
+    model.learn(total_timesteps=s.env_steps, callback=Timer())
+    do_eval()  # after the last cycle's gradient steps
+    return {"curve": curve, "collect_wall_s": clock["collect"], "updates": int(model._n_updates)}
+
+
+# ----------------------------------------------------------------------------------------------------------
+# our side
+# ----------------------------------------------------------------------------------------------------------
+def ours_cli(learner: str, seed: int, s: Settings, steps: int) -> list[str]:
+    """``lerobot-indicator-train`` flags of one of our learners (without ``--output_dir``)."""
+    return [
+        *TASKS[TASK].env_args,
+        "--policy.type=indicator_ddpg",
+        "--policy.device=cpu",
+        "--policy.push_to_hub=false",
+        f"--policy.learning_rate={s.lr}",
+        f"--policy.noise_eps={s.noise}",
+        *METHODS[OURS[learner]],
+        "--online.n_envs=1",
+        "--online.use_async_envs=false",
+        f"--online.episodes_per_cycle={s.episodes_per_cycle}",
+        f"--online.updates_per_cycle={s.updates_per_cycle}",
+        f"--online.batch_size={s.batch_size}",
+        f"--online.eval_episodes={s.eval_episodes}",
+        f"--steps={steps}",
+        f"--policy.compile_model={str(s.compile).lower()}",
+        f"--env_eval_freq={s.eval_every * s.updates_per_cycle // (s.episodes_per_cycle * HORIZON)}",
+        "--save_checkpoint=false",
+        f"--seed={seed}",
+    ]
+
+
+def ours_config(learner: str, seed: int, s: Settings, output_dir: Path, steps: int):
+    import draccus
+
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    cfg = draccus.parse(
+        OnlineTrainConfig, args=[*ours_cli(learner, seed, s, steps), f"--output_dir={output_dir}"]
+    )
+    cfg.validate()
+    return cfg
+
+
+class EvalCurve:
+    """Trainer hooks that record the eval curve against the training wall-clock (evaluation excluded) and the
+    time spent collecting and optimising."""
+
+    def __init__(self) -> None:
+        self.curve: list[dict] = []
+        self.start: float | None = None
+        self.eval_s = self.collect_s = self.optimise_s = 0.0
+
+    def hooks(self) -> TrainerHooks:
+        return TrainerHooks(
+            on_cycle_start=self._cycle_start,
+            on_collect_end=self._collect_end,
+            on_update_end=self._update_end,
+            on_eval_end=self._eval_end,
+        )
+
+    def _cycle_start(self, cycle: int) -> None:
+        if self.start is None:
+            self.start = time.perf_counter()
+
+    def _collect_end(self, phase: PhaseEnd, rollouts: object) -> None:
+        self.collect_s += phase.seconds
+
+    def _update_end(self, phase: PhaseEnd, stats: dict[str, float]) -> None:
+        self.optimise_s += phase.seconds
+
+    def _eval_end(self, phase: PhaseEnd, metrics: dict[str, float]) -> None:
+        train_wall = time.perf_counter() - phase.seconds - self.start - self.eval_s
+        self.eval_s += phase.seconds
+        self.curve.append(
+            {"env_steps": phase.env_steps, "updates": phase.step, "train_wall_s": train_wall, **metrics}
+        )
+
+
+def run_ours(learner: str, seed: int, s: Settings) -> dict:
+    from lerobot_indicator.training.online import OnlineTrainer
+
+    timing = EvalCurve()
+    with tempfile.TemporaryDirectory() as tmp:
+        trainer = OnlineTrainer(ours_config(learner, seed, s, Path(tmp) / "run", s.steps()), timing.hooks())
+        try:
+            trainer.train()
+        finally:
+            trainer.close()
+    return {
+        "curve": timing.curve,
+        "collect_wall_s": timing.collect_s,
+        "optimise_wall_s": timing.optimise_s,
+        "updates": trainer.progress.step,
+        "cli": "lerobot-indicator-train " + " ".join(ours_cli(learner, seed, s, s.steps())),
+    }
+
+
+def run_learner(learner: str, seed: int, s: Settings) -> dict:
+    torch.set_num_threads(s.threads)
+    t0 = time.perf_counter()
+    run = run_sb3(seed, s) if learner == "sb3_ddpg_her" else run_ours(learner, seed, s)
+    run["process_wall_s"] = time.perf_counter() - t0
+    return run
+
+
+def run_in_subprocess(learner: str, seed: int, s: Settings) -> dict:
+    """One training run in a fresh process (``python -m benchmarks.experiments.vs_sb3``)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.json"
+        request = json.dumps({"learner": learner, "seed": seed, "settings": asdict(s), "out": str(out)})
+        subprocess.run([sys.executable, "-m", __name__, request], check=True, cwd=REPO)
+        return json.loads(out.read_text())
+
+
+# ----------------------------------------------------------------------------------------------------------
+# update throughput, one process, interleaved
+# ----------------------------------------------------------------------------------------------------------
+def time_update_arms(learner: str, sb3, s: Settings) -> tuple[dict[str, list[float]], dict[str, float]]:
+    """Seconds per block of ``updates_per_block`` gradient steps for each arm: ours (eager), ours with
+    ``--policy.compile_model=true`` when ``compile`` is set, and SB3; and the matmul FLOPs per update."""
+    from lerobot_indicator.training.online import OnlineTrainer, cycle_episode_seeds
+
+    n = s.updates_per_block
+    variants = {"ours": False, **({"ours_compiled": True} if s.compile else {})}
+    arms, trainers = {}, []
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, compiled in variants.items():
+            cfg = ours_config(learner, 0, s, Path(tmp) / name, steps=max(n, s.updates_per_cycle))
+            cfg.online.updates_per_cycle = n
+            cfg.policy.compile_model = compiled
+            trainer = OnlineTrainer(cfg)
+            g = torch.Generator().manual_seed(0)
+            for cycle in range(s.fill_episodes // s.episodes_per_cycle):
+                seeds = cycle_episode_seeds(cfg.seed, cycle, s.episodes_per_cycle)
+                for r in trainer.collect_episodes(seeds, True, g, random_eps=1.0):
+                    for episode in r.episodes():
+                        trainer.buffer.add_episode(*episode)
+            rng = np.random.default_rng(0)
+            arms[name] = lambda trainer=trainer, rng=rng, g=g: trainer.optimise(rng, g)
+            trainers.append(trainer)
+
+        def sb3_train() -> None:
+            sb3.train(gradient_steps=n, batch_size=s.batch_size)
+
+        arms["sb3"] = sb3_train
+        names = list(arms)
+        flops = {}
+        for name in names:  # warm-up (and compilation); matmul FLOPs counted on the eager arms
+            if name in ("ours", "sb3"):
+                with FlopCounterMode(display=False) as counter:
+                    arms[name]()
+                flops[name] = counter.get_total_flops() / n
+            else:
+                arms[name]()
+        times: dict[str, list[float]] = {name: [] for name in names}
+        for block in range(s.update_blocks):
+            k = block % len(names)
+            for name in names[k:] + names[:k]:
+                t0 = time.perf_counter()
+                arms[name]()
+                times[name].append(time.perf_counter() - t0)
+        for trainer in trainers:
+            trainer.close()
+    return times, flops
+
+
+def sgemm_gflops(size: int = 256, repeats: int = 400) -> float:
+    """This core's float32 matmul throughput at the update's layer size: the roofline for both libraries."""
+    a, b = torch.randn(size, size), torch.randn(size, size)
+    for _ in range(20):
+        a @ b
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        a @ b
+    return 2 * size**3 * repeats / (time.perf_counter() - t0) / 1e9
+
+
+def bench_updates(s: Settings) -> dict:
+    """Gradient updates/s at batch 256 incl. replay sampling (what each library's train step does), both
+    buffers filled with the same number of random-action episodes; blocks interleaved, the order of the arms
+    rotating every block. Also each library's matmul FLOPs per update (``torch.utils.flop_counter``; the
+    compiled arm does the same math as ``ours``) and the share of the core's measured sgemm throughput they
+    reach: the headroom left once the matmuls dominate."""
+    n = s.updates_per_block
+    sb3 = make_sb3(0, s, learning_starts=10**9)
+    sb3.learn(total_timesteps=s.fill_episodes * HORIZON)  # random actions, no training
+    results = {}
+    for learner in ("ours_indicator", "ours_oracle"):
+        times, flops = time_update_arms(learner, sb3, s)
+        r = {f"{name}_updates_per_s": n * len(t) / sum(t) for name, t in times.items()}
+        flops["ours_compiled"] = flops["ours"]
+        for name in times:
+            r[f"{name}_matmul_gflop_per_update"] = flops[name] / 1e9
+            r[f"{name}_matmul_gflops"] = flops[name] * r[f"{name}_updates_per_s"] / 1e9
+        r |= {f"per_block_{name}": [n / x for x in t] for name, t in times.items()}
+        for name in (x for x in times if x != "sb3"):
+            ratios = [b / a for b, a in zip(times["sb3"], times[name], strict=True)]
+            r[f"{name}_over_sb3"] = r[f"{name}_updates_per_s"] / r["sb3_updates_per_s"]
+            r[f"{name}_over_sb3_median_of_blocks"] = float(np.median(ratios))
+        results[learner] = r
+        print(
+            f"updates/s {learner}: "
+            + ", ".join(f"{name} {r[f'{name}_updates_per_s']:.1f}" for name in times)
+            + "".join(
+                f", {name}/SB3 {r[f'{name}_over_sb3']:.2f} (median of blocks {r[f'{name}_over_sb3_median_of_blocks']:.2f})"
+                for name in times
+                if name != "sb3"
+            )
+            + "; matmul GFLOP/s "
+            + ", ".join(f"{name} {r[f'{name}_matmul_gflops']:.1f}" for name in times),
+            flush=True,
+        )
+    peak = sgemm_gflops()
+    for r in results.values():
+        for name in [k.removesuffix("_matmul_gflops") for k in r if k.endswith("_matmul_gflops")]:
+            r[f"{name}_share_of_sgemm_peak"] = r[f"{name}_matmul_gflops"] / peak
+    print(f"sgemm 256x256x256 on this core: {peak:.1f} GFLOP/s", flush=True)
+    return {
+        "sgemm_gflops_256": peak,
+        "batch_size": s.batch_size,
+        "filled_episodes": s.fill_episodes,
+        "updates_per_block": n,
+        "blocks": s.update_blocks,
+        **results,
+    }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# summary
+# ----------------------------------------------------------------------------------------------------------
+def summarise_run(run: dict) -> dict:
+    curve = run["curve"]
+    hit = next((c for c in curve if c["eval_success_rate"] >= SUCCESS_TARGET), None)
+    final = curve[-1]
+    train_wall = final["train_wall_s"]
+    return {
+        "env_steps_to_90": hit["env_steps"] if hit else None,
+        "train_wall_s_to_90": hit["train_wall_s"] if hit else None,
+        "final_success_rate": final["eval_success_rate"],
+        "final_distance_m": final["eval_final_distance"],
+        "train_wall_s": train_wall,
+        "env_steps_per_s_training": final["env_steps"] / train_wall,
+        "env_steps_per_s_collecting": final["env_steps"] / run["collect_wall_s"],
+    }
+
+
+def aggregate(runs: list[dict]) -> dict:
+    s = [r["summary"] for r in runs]
+
+    def stat(key: str) -> dict:
+        vals = [x[key] for x in s if x[key] is not None]
+        return {
+            "mean": float(np.mean(vals)) if vals else None,
+            "median": float(np.median(vals)) if vals else None,
+            "n_reached": len(vals),
+        }
+
+    keys = ("env_steps_to_90", "train_wall_s_to_90", "final_success_rate", "final_distance_m")
+    keys += ("train_wall_s", "env_steps_per_s_training", "env_steps_per_s_collecting")
+    return {k: stat(k) for k in keys}
+
+
+def training_runs(seeds: list[int], learners: list[str], s: Settings) -> list[dict]:
+    """Every (seed, learner) run in its own process, interleaved seed by seed so machine noise hits all
+    learners alike."""
+    runs = []
+    for seed in seeds:
+        for learner in learners:
+            run = run_in_subprocess(learner, seed, s)
+            run |= {"method": learner, "seed": seed, "summary": summarise_run(run)}
+            runs.append(run)
+            print(f"{learner} seed {seed}: {json.dumps(run['summary'])}", flush=True)
+    return runs
+
+
+def plot(record: dict, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.2))
+    colors = {"sb3_ddpg_her": "tab:gray", "ours_oracle": "tab:blue", "ours_indicator": "tab:red"}
+    labels = {
+        "sb3_ddpg_her": "SB3 DDPG+HER (GT reward)",
+        "ours_oracle": "ours, oracle (GT reward)",
+        "ours_indicator": "ours, indicator+balance+filter",
+    }
+    for learner in LEARNERS:
+        runs = [r for r in record["runs"] if r["method"] == learner]
+        if not runs:
+            continue
+        for i, r in enumerate(runs):
+            steps = [c["env_steps"] for c in r["curve"]]
+            wall = [c["train_wall_s"] for c in r["curve"]]
+            succ = [c["eval_success_rate"] for c in r["curve"]]
+            label = labels[learner] if i == 0 else None
+            axes[0].plot(steps, succ, color=colors[learner], alpha=0.35, lw=1)
+            axes[1].plot(wall, succ, color=colors[learner], alpha=0.8, lw=1.2, label=label)
+        n = min(len(r["curve"]) for r in runs)
+        steps = [c["env_steps"] for c in runs[0]["curve"][:n]]
+        mean = np.mean([[c["eval_success_rate"] for c in r["curve"][:n]] for r in runs], axis=0)
+        axes[0].plot(steps, mean, color=colors[learner], lw=2.2, label=f"{labels[learner]} (mean)")
+    for ax, xlabel in zip(axes[:2], ("env steps", "training wall-clock (s, eval excluded)"), strict=True):
+        ax.axhline(SUCCESS_TARGET, color="k", ls=":", lw=0.8)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("eval success rate")
+        ax.set_ylim(-0.02, 1.02)
+        ax.legend(fontsize=7)
+    upd = record["update_throughput"]
+    names = ["SB3 DDPG+HER", "ours oracle", "ours indicator"]
+    vals = [
+        upd["ours_indicator"]["sb3_updates_per_s"],
+        upd["ours_oracle"]["ours_updates_per_s"],
+        upd["ours_indicator"]["ours_updates_per_s"],
+    ]
+    axes[2].bar(names, vals, color=[colors[m] for m in LEARNERS])
+    axes[2].set_ylabel("gradient updates/s")
+    axes[2].set_title(f"batch {upd['batch_size']}, CPU, incl. replay sampling", fontsize=9)
+    for i, v in enumerate(vals):
+        axes[2].text(i, v, f"{v:.1f}", ha="center", va="bottom")
+    fig.suptitle(
+        f"Sawyer reach (state): SB3 {record['versions']['stable_baselines3']} vs lerobot-indicator, "
+        f"seeds {record['seeds']}, {record['env_steps_budget']} env steps, "
+        f"torch threads {record['torch_threads']}"
+    )
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def run_benchmark(
+    seeds: list[int], learners: list[str], s: Settings, out_dir: Path, command: str, skip_training: bool
+) -> dict:
+    """The update benchmark, then (unless ``skip_training``) every training run; writes ``vs_sb3.json`` and
+    ``vs_sb3.png``, or ``vs_sb3_updates.json`` for the update benchmark alone (never replacing a full run)."""
+    import stable_baselines3
+
+    s.validate()
+    load_start = os.getloadavg()
+    t_start = time.perf_counter()
+    torch.set_num_threads(s.threads)
+    update_throughput = bench_updates(s)
+    runs = [] if skip_training else training_runs(seeds, learners, s)
+    record = {
+        "command": command,
+        "machine": {"cpus": os.cpu_count(), "cpu": cpu_model()},
+        "load_average_1_5_15_min": {"start": load_start, "end": os.getloadavg()},
+        "bench_wall_s": time.perf_counter() - t_start,
+        "torch_threads": s.threads,
+        "versions": {
+            "stable_baselines3": stable_baselines3.__version__,
+            "torch": torch.__version__,
+            "numpy": np.__version__,
+            "python": platform.python_version(),
+        },
+        "seeds": seeds,
+        "env_steps_budget": s.env_steps,
+        "settings": asdict(s)
+        | {
+            "gamma": 1 - 1 / HORIZON,
+            "target_smoothing": 0.98,
+            "hidden": [256, 256, 256],
+            "activation": "tanh",
+        },
+        "presets": {learner: METHODS[OURS[learner]] for learner in OURS},
+        "protocol_differences": PROTOCOL_DIFFERENCES,
+        "update_throughput": update_throughput,
+        "summary": {m: aggregate([r for r in runs if r["method"] == m]) for m in learners} if runs else {},
+        "runs": runs,
+    }
+    if runs:
+        sb3 = record["summary"].get("sb3_ddpg_her", {}).get("env_steps_to_90", {}).get("mean")
+        ind = record["summary"].get("ours_indicator", {}).get("env_steps_to_90", {}).get("mean")
+        record["ratio_env_steps_to_90_indicator_over_sb3"] = ind / sb3 if sb3 and ind else None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / ("vs_sb3.json" if runs else "vs_sb3_updates.json")).write_text(
+        json.dumps(record, indent=2) + "\n"
+    )
+    if runs:
+        plot(record, out_dir / "vs_sb3.png")
+    return record
+
+
+def main() -> None:
+    """A single training run, as ``run_in_subprocess`` asks for it (one JSON argument)."""
+    request = json.loads(sys.argv[1])
+    run = run_learner(request["learner"], request["seed"], Settings(**request["settings"]))
+    Path(request["out"]).write_text(json.dumps(run))
+
+
+if __name__ == "__main__":
+    main()

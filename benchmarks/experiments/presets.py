@@ -67,10 +67,11 @@ for _m in ("indicator_balance", "indicator_filter"):
         "--policy.inverse_dynamics=1.0",
     ]
 # The critic's MLP predicting (1-gamma) Q (docs/policy.md): an Oracle seed whose critic saturated learns with it.
-VARIANTS["oracle_n3_inverse_dynamics_return_scale"] = [
-    *VARIANTS["oracle_n3_inverse_dynamics"],
-    "--policy.critic_output_scale=return",
-]
+for _m in ("oracle", "indicator", "indicator_balance_filter"):
+    VARIANTS[f"{_m}_n3_inverse_dynamics_return_scale"] = [
+        *VARIANTS[f"{_m}_n3_inverse_dynamics"],
+        "--policy.critic_output_scale=return",
+    ]
 # The paper's encoder with the same 3-step targets (it has no shared encoder for the inverse-dynamics loss).
 VARIANTS["indicator_balance_filter_paper_encoder_n3"] = [
     *VARIANTS["indicator_balance_filter_paper_encoder"],
@@ -127,6 +128,10 @@ LABELS = {
     "indicator_balance_n3_inverse_dynamics": "Indicator+Balance, 3-step, inverse dynamics",
     "indicator_filter_n3_inverse_dynamics": "Indicator+Filter, 3-step, inverse dynamics",
     "oracle_n3_inverse_dynamics_return_scale": "Oracle, 3-step, inverse dynamics, critic output x T",
+    "indicator_n3_inverse_dynamics_return_scale": "Indicator, 3-step, inverse dynamics, critic output x T",
+    "indicator_balance_filter_n3_inverse_dynamics_return_scale": (
+        "Indicator+Balance+Filter, 3-step, inverse dynamics, critic output x T"
+    ),
     "indicator_balance_filter_paper_encoder_n3": "Indicator+Balance+Filter, paper encoder, 3-step",
     "oracle_no_augmentation": "Oracle, no augmentation",
     "indicator_balance_filter_inverse_dynamics_no_augmentation": "Indicator+Balance+Filter, inverse dynamics, no augmentation",
@@ -164,6 +169,8 @@ STYLES = {
     "indicator_balance_n3_inverse_dynamics": ("tab:green", "-"),
     "indicator_filter_n3_inverse_dynamics": ("tab:pink", "-"),
     "oracle_n3_inverse_dynamics_return_scale": ("navy", "--"),
+    "indicator_n3_inverse_dynamics_return_scale": ("darkorange", "--"),
+    "indicator_balance_filter_n3_inverse_dynamics_return_scale": ("tab:red", "--"),
     "indicator_balance_filter_paper_encoder_n3": ("dimgray", "-"),
     "oracle_no_augmentation": ("tab:blue", ":"),
     "indicator_balance_filter_inverse_dynamics_no_augmentation": ("tab:brown", "--"),

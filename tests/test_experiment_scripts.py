@@ -3,6 +3,7 @@ runner's stop on a signal or a failed run."""
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -112,7 +113,14 @@ def test_eval_goals_on_a_trained_checkpoint(trained_run, tmp_path):
     env_args, env = REACH_ARGS, SCRIPT_ENV
     out = tmp_path / "eval_goals.json"
     policy_path = trained_run / "checkpoints" / "last" / "pretrained_model"
-    cmd = [sys.executable, "-m", "benchmarks.probes.run_eval_goals", *env_args, f"--policy_path={policy_path}", "--episodes=2"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "benchmarks.probes.run_eval_goals",
+        *env_args,
+        f"--policy_path={policy_path}",
+        "--episodes=2",
+    ]
     subprocess.run([*cmd, f"--out={out}"], cwd=ROOT, check=True, env=env, capture_output=True)
     record = json.loads(out.read_text())
     assert [r["seed"] for r in record["episodes"]] == [EVAL_SEED_OFFSET, EVAL_SEED_OFFSET + 1]
@@ -372,3 +380,21 @@ def test_ctrl_c_reaches_the_trainer_once_and_the_sweep_exits_without_a_traceback
     assert proc.returncode == 130, err
     assert "interrupted: rerun the same command" in err and "Traceback" not in err, err
     assert mark.read_text().split() == ["started", "INT"]
+
+
+def test_replot_draws_the_chosen_arms_and_keeps_summary_and_table(tmp_path, monkeypatch):
+    out = tmp_path / "experiments"
+    shutil.copytree(ROOT / "docs" / "results" / "experiments", out)
+    before = {name: (out / name).read_bytes() for name in ("summary.json", "table.md")}
+    drawn = {}
+    monkeypatch.setattr(
+        experiments, "plot", lambda summary, path, reference: drawn.update({path.name: summary})
+    )
+    paper = ["oracle", "indicator_balance_filter", "indicator"]
+    written = experiments.replot(out, paper, ["indicator_balance_recorded_fallback"])
+    assert [p.name for p in written] == ["comparison.png", "ablations.png"]
+    assert list(drawn["comparison.png"]["reach_state"]) == paper  # in the order asked for
+    assert list(drawn["ablations.png"]["reach_state"]) == ["indicator_balance_recorded_fallback"]
+    assert {name: (out / name).read_bytes() for name in before} == before
+    with pytest.raises(ValueError, match="holds none of the methods"):
+        experiments.replot(out, ["vae"], [])

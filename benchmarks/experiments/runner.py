@@ -62,9 +62,19 @@ class ExperimentConfig:
     # Committed summary.json files whose seeds (of --methods and --seeds, for --tasks) join the summary, plot
     # and table where runs_dir has no run of that seed: runs made elsewhere, whose run directories are not here.
     include_summaries: list[Path] = field(default_factory=list)
+    # Redraw the figures from <out>/summary.json alone (no runs read, summary and table kept): comparison.png
+    # with plot_methods (the paper's arms of that figure), ablations.png with ablation_methods when given.
+    replot: bool = False
+    plot_methods: list[str] = field(default_factory=list)
+    ablation_methods: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        for name, known, values in (("tasks", TASKS, self.tasks), ("methods", METHODS, self.methods)):
+        for name, known, values in (
+            ("tasks", TASKS, self.tasks),
+            ("methods", METHODS, self.methods),
+            ("plot_methods", METHODS, self.plot_methods),
+            ("ablation_methods", METHODS, self.ablation_methods),
+        ):
             unknown = [v for v in values if v not in known]
             if unknown:
                 raise ValueError(f"--{name}: unknown {unknown}; choose from {list(known)}")
@@ -380,8 +390,30 @@ def launch_all(cfg: ExperimentConfig) -> dict[str, float]:
     return wall
 
 
+def replot(out: Path, plot_methods: list[str], ablation_methods: list[str]) -> list[Path]:
+    """Redraw ``out``'s figures from its summary.json: ``comparison.png`` with ``plot_methods`` (every method
+    of the summary when empty) and ``ablations.png`` with ``ablation_methods`` (none when empty)."""
+    tasks = json.loads((out / "summary.json").read_text())["tasks"]
+    reference = start_distances(out, list(tasks))
+    written = []
+    for methods, name in ((plot_methods or None, "comparison.png"), (ablation_methods, "ablations.png")):
+        if methods is not None and not methods:
+            continue
+        chosen = {t: {m: ms[m] for m in (methods or ms) if m in ms} for t, ms in tasks.items()}
+        chosen = {t: ms for t, ms in chosen.items() if ms}
+        if not chosen:
+            raise ValueError(f"{out / 'summary.json'} holds none of the methods {methods}")
+        plot(chosen, out / name, reference)
+        written.append(out / name)
+    return written
+
+
 def main() -> None:
     cfg = draccus.parse(ExperimentConfig)
+    if cfg.replot:
+        for path in replot(cfg.out, cfg.plot_methods, cfg.ablation_methods):
+            print(f"wrote {path}")
+        return
     cfg.out.mkdir(parents=True, exist_ok=True)
     wall = {} if cfg.plot_only else launch_all(cfg)
     runs = {task: collect_runs(cfg, task) for task in cfg.tasks}

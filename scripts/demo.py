@@ -62,7 +62,7 @@ DEMOS: dict[str, DemoPreset] = {
             "--policy.inverse_dynamics=1.0",
             # Both cores for the updates: the demo has the machine to itself (1 thread is the default because
             # concurrent runs on 2 cores are slower with 2 threads each; docs/results/policy_updates.json).
-            "--policy.cpu_threads=2",
+            "--cpu_threads=2",
             "--steps=8000",
             "--online.episodes_per_cycle=4",
             "--online.updates_per_cycle=100",

@@ -6,7 +6,6 @@ import re
 
 import pytest
 import torch
-from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.records import git_commit
 from benchmarks.speed.peers import make_sac_update, matmul_conv_flops, measure_peaks
@@ -53,45 +52,6 @@ def test_sac_update_changes_critics_actor_and_temperature(freeze_vision_encoder)
     step()
     assert algo._optimization_step == 2
     assert any(not torch.equal(a, b) for a, b in zip(after_critic, _critic_params(step), strict=True))
-
-
-def test_fused_conv_relu_counts_the_flops_of_the_plain_conv():
-    import torch.nn.functional as F
-
-    from lerobot_indicator.policy.networks_indicator_ddpg import conv_relu
-
-    x = torch.randn(3, 4, 17, 17).contiguous(memory_format=torch.channels_last).requires_grad_()
-    w, b = torch.randn(8, 4, 3, 3, requires_grad=True), torch.randn(8, requires_grad=True)
-
-    def step(fn):
-        return lambda: fn(x, w, b, 2).sum().backward()
-
-    plain = matmul_conv_flops(step(lambda *a: F.relu(F.conv2d(*a))))
-    # forward 2 * 3*8*8*8 outputs * 36 MACs, backward twice that (input and weight gradients)
-    assert plain == 3 * 2 * (3 * 8 * 8 * 8) * 36
-    assert matmul_conv_flops(step(conv_relu)) == plain
-
-
-def test_unfused_arm_runs_plain_convs_and_the_default_runs_fused_ones():
-    from benchmarks.speed.peers import without_fused_conv_relu
-    from lerobot_indicator.policy.networks_indicator_ddpg import conv_relu
-
-    x = torch.randn(2, 4, 9, 9).contiguous(memory_format=torch.channels_last)
-    w, b = torch.randn(8, 4, 3, 3), torch.randn(8)
-    calls = []
-
-    def step() -> None:
-        counter = FlopCounterMode(display=False)
-        with counter:
-            conv_relu(x, w, b, 1)
-        calls.append({str(op) for op in counter.get_flop_counts()["Global"]})
-
-    step()
-    without_fused_conv_relu(step)()
-    step()
-    assert calls[0] == {"mkldnn._convolution_pointwise"}
-    assert calls[1] == {"aten.convolution"}
-    assert calls[2] == calls[0]  # the patch is undone after the arm's step
 
 
 def test_flops_positive_and_linear_in_batch():

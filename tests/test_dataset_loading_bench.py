@@ -82,21 +82,24 @@ def test_loading_floor_compares_the_reader_floor_spread_over_every_core_with_the
     assert floor["floor_over_update_with_every_core"] == 10.0  # 20 ms / 2 cores against 1 ms
 
 
-def test_train_run_spec_turns_start_method_and_decoder_threads_into_lerobot_train_flags():
+def test_train_run_spec_turns_start_method_and_decoder_threads_into_lerobot_train_flags_and_environment():
     import pytest
 
     from benchmarks.speed.offline_throughput import train_run_spec
+    from lerobot_indicator.process import environment
 
-    assert train_run_spec("video:3") == ("video", 3, [], "video_workers3")
+    assert train_run_spec("video:3") == ("video", 3, [], environment(), "video_workers3")
     assert train_run_spec("video:3:fork") == (
-        "video", 3, ["--dataloader_multiprocessing_context=fork"], "video_workers3_fork"
+        "video", 3, ["--dataloader_multiprocessing_context=fork"], environment(), "video_workers3_fork"
     )  # fmt: skip
-    assert train_run_spec("png:0:spawn:auto") == (
-        "png",
-        0,
-        ["--dataloader_multiprocessing_context=spawn", "--policy.video_decoder_threads=null"],
-        "png_workers0_spawn_decoder_threads_auto",
+    storage, workers, extra, env, name = train_run_spec("png:0:spawn:auto")
+    assert (storage, workers, extra) == ("png", 0, ["--dataloader_multiprocessing_context=spawn"])
+    assert (
+        env == environment(video_decoder_threads=None)
+        and "LEROBOT_INDICATOR_VIDEO_DECODER_THREADS" not in env
     )
-    for bad in ("video", "mp4:3", "video:x", "video:3:fork:1:2"):
+    assert name == "png_workers0_spawn_decoder_threads_auto"
+    assert train_run_spec("video:3:fork:2")[3]["LEROBOT_INDICATOR_VIDEO_DECODER_THREADS"] == "2"
+    for bad in ("video", "mp4:3", "video:x", "video:3:fork:1:2", "video:3:fork:x"):
         with pytest.raises(ValueError, match="expected png\\|video:<workers>"):
             train_run_spec(bad)

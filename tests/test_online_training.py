@@ -212,19 +212,17 @@ online.main()
 
 
 @pytest.mark.parametrize(
-    ("checkpoint_every_s", "kill_at", "kill_with", "exit_code"),
+    ("kill_at", "kill_with", "exit_code"),
     [
-        # Cycle 1's episodes are recorded and checkpointed, its resume state is not saved: the resumed run
-        # replays cycle 1 and must skip the episode the dataset already has.
-        ("0", "lerobot_indicator.training.run_state:RunDir.save_state:2", "Ctrl-C", 130),
-        # Dataset checkpoint + resume state only after cycle 0; SIGTERM while training cycle 2: the dataset
-        # rolls back to its checkpoint and cycles 1-2 are replayed and recorded once.
-        ("3600", "lerobot_indicator.training.online:OnlineTrainer.optimise:3", "SIGTERM", 143),
+        # Cycle 1's episodes are recorded (each committed as it is saved), its resume state is not saved: the
+        # resumed run replays cycle 1 and must skip the episode the dataset already has.
+        ("lerobot_indicator.training.run_state:RunDir.save_state:2", "Ctrl-C", 130),
+        # SIGTERM while training cycle 2, after its episode was recorded: the resumed run replays cycle 2
+        # from the resume state of cycle 1 and records its episode once.
+        ("lerobot_indicator.training.online:OnlineTrainer.optimise:3", "SIGTERM", 143),
     ],
 )
-def test_resumed_recording_has_each_episode_once(
-    tmp_path, monkeypatch, checkpoint_every_s, kill_at, kill_with, exit_code
-):
+def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, kill_at, kill_with, exit_code):
     """A run stopped by Ctrl-C or SIGTERM with --record and resumed ends with the same dataset as an
     uninterrupted run; it stops with the shell's exit code for that signal and one line saying how to go on."""
     from lerobot.datasets import LeRobotDataset
@@ -235,7 +233,6 @@ def test_resumed_recording_has_each_episode_once(
             *ENVS["sawyer_reach"],
             f"--record.repo_id=local/{name}",
             f"--record.root={root}",
-            f"--record.checkpoint_every_s={checkpoint_every_s}",
         ]
 
     _train(tmp_path / "full", *record_args("full"), "--steps=15")
@@ -270,7 +267,6 @@ def test_resumed_recording_has_each_episode_once(
     [
         ("--online.input_stats=frozen", "--online.input_stats must be one of"),
         ("--online.episodes_per_cycle=0", "--online.episodes_per_cycle must be >= 1"),
-        ("--record.checkpoint_every_s=-1", "--record.checkpoint_every_s must be >= 0"),
         ("--online.backend=mpi", "--online.backend must be one of \\('local', 'ray'\\), got 'mpi'"),
         ("--online.num_workers=0", "--online.num_workers must be >= 1, got 0"),
     ],
@@ -327,13 +323,12 @@ def test_record_flags_parse(tmp_path):
         "--record.repo_id=local/x",
         f"--record.root={tmp_path / 'ds'}",
         "--record.push_to_hub=true",
-        "--record.checkpoint_every_s=5",
     ]
     cfg = draccus.parse(
         OnlineTrainConfig, args=[*TINY, *ENVS["sawyer_reach"], f"--output_dir={tmp_path / 'run'}", *record]
     )
     cfg.validate()
-    assert cfg.record == OnlineRecordConfig("local/x", str(tmp_path / "ds"), True, 5.0)
+    assert cfg.record == OnlineRecordConfig("local/x", str(tmp_path / "ds"), True)
 
 
 def test_hooks_see_every_phase_with_its_result(tmp_path):

@@ -247,6 +247,33 @@ def test_save_load_round_trip(tmp_path):
         assert torch.equal(a, b), name  # target nets and normalisation buffers included
 
 
+def test_checkpoint_with_process_settings_loads_and_saves_without_them(tmp_path):
+    """Checkpoints of earlier versions hold cpu_threads, keep_freed_memory and video_decoder_threads: they
+    load (the keys are ignored, the process is left alone) and are saved again without them."""
+    import json
+
+    from lerobot.configs import PreTrainedConfig
+
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IGNORED_KEYS
+
+    policy = IndicatorDDPGPolicy(rgbd_config(horizon=7))
+    policy.save_pretrained(tmp_path)
+    path = tmp_path / "config.json"
+    saved = json.loads(path.read_text())
+    assert saved["type"] == "indicator_ddpg" and not set(IGNORED_KEYS) & set(saved)
+    path.write_text(
+        json.dumps({**saved, "cpu_threads": 7, "keep_freed_memory": True, "video_decoder_threads": 1})
+    )
+    threads = torch.get_num_threads()
+    loaded = IndicatorDDPGPolicy.from_pretrained(tmp_path)
+    assert torch.get_num_threads() == threads
+    assert loaded.config == policy.config and PreTrainedConfig.from_pretrained(tmp_path).horizon == 7
+    loaded.save_pretrained(tmp_path)
+    assert not set(IGNORED_KEYS) & set(json.loads(path.read_text()))
+    with pytest.raises(SystemExit):  # not a --policy.* flag: lerobot-indicator-train has --cpu_threads
+        PreTrainedConfig.from_pretrained(tmp_path, cli_overrides=["--cpu_threads=2"])
+
+
 @pytest.fixture
 def one_thread():
     """Small nets on a shared 2-core machine: extra intra-op threads only wait (docs/policy.md, benchmarks)."""

@@ -178,7 +178,7 @@ def test_ray_backend_records_and_resumes_as_the_local_backend(ray_cluster, local
 
     def record(name: str) -> list[str]:
         root = tmp_path / f"{name}_dataset"
-        return [f"--record.repo_id=local/{name}", f"--record.root={root}", "--record.checkpoint_every_s=0"]
+        return [f"--record.repo_id=local/{name}", f"--record.root={root}"]
 
     local_rows, local_state = _train(tmp_path / "local", *record("local"))
     assert local_rows == local_run[0]  # recording changes nothing the run computes

@@ -17,11 +17,7 @@ from huggingface_hub import constants as hf_constants
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
 from lerobot_indicator.data import action_sources, recorder
-from lerobot_indicator.data.checkpoint import (
-    JOURNAL_DIR,
-    has_checkpoint,
-    restore_checkpoint,
-)
+from lerobot_indicator.data.checkpoint import JOURNAL_DIR
 from lerobot_indicator.data.recorder import RecordConfig, make_single_env, record
 from lerobot_indicator.data.storage import DepthRangeError, check_depth_range
 from lerobot_indicator.envs import RopePushEnvConfig, SawyerReachEnvConfig
@@ -55,7 +51,6 @@ def record_tiny(root: Path, obs_type="rgbd", task="sawyer_reach", **kwargs) -> L
         repo_id=f"test/{task}_{obs_type}",
         root=root,
         num_episodes=kwargs.pop("num_episodes", 2),
-        checkpoint_every_s=0,
         **kwargs,
     )
     return record(cfg)
@@ -319,7 +314,6 @@ def test_killed_recording_is_readable_as_it_is_and_resumes(tmp_path, monkeypatch
         proc.send_signal(signal.SIGKILL)
         proc.wait()
 
-    assert not has_checkpoint(root)  # no rollback journal: nothing to roll back
     ds = load_offline(root, "test/killed", monkeypatch)
     kept = ds.num_episodes
     assert kept >= 2 and len(ds) == kept * F
@@ -412,11 +406,15 @@ def test_corrupt_frame_fails_with_one_line(tmp_path, monkeypatch, capsys, use_vi
     assert (ds.num_episodes, len(ds)) == (1, F)
 
 
-def test_restore_keeps_a_consistent_dataset_ahead_of_its_checkpoint(tmp_path, monkeypatch):
-    """A rollback journal left behind by a dataset that was finalized after its checkpoint (an exception
-    or Ctrl-C in the online trainer's --record.*): restoring keeps every episode, it deletes none."""
+def test_abandoned_session_keeps_its_saved_episodes_and_resumes(tmp_path, monkeypatch):
+    """The API the online trainer's --record.* uses (open_recording, save_episode per episode): a session
+    left without close() (as by SIGKILL) reads as its saved episodes; resuming appends after them."""
     cfg = RecordConfig(
-        env=env_cfg(obs_type="state"), repo_id="test/ahead", root=tmp_path / "ds", num_episodes=1
+        env=env_cfg(obs_type="state"),
+        repo_id="test/session",
+        root=tmp_path / "ds",
+        num_episodes=1,
+        image_writer_threads=0,
     )
     vec = make_single_env(cfg.env)
     try:
@@ -425,22 +423,25 @@ def test_restore_keeps_a_consistent_dataset_ahead_of_its_checkpoint(tmp_path, mo
             vec.single_observation_space, vec.single_action_space, recorder.unbatch(info), False
         )
         cfg.reward_keys = recorder.default_reward_keys(features)
-        dataset = recorder.open_dataset(cfg, features)
         source = action_sources.RandomActions(vec.action_space, 0)
         stepper = recorder.EpisodeStepper(vec)
-        for episode in range(3):
-            recorder._record_episode(cfg, stepper, source, dataset, "reach", episode)
-            dataset.save_episode()
-            if episode == 0:
-                dataset = recorder.checkpoint_dataset(cfg, dataset)
-        dataset.finalize()
+        abandoned = recorder.open_recording(cfg, features, horizon=None)
+        for episode in range(2):
+            recorder._record_episode(cfg, stepper, source, abandoned.dataset, "reach", episode)
+            abandoned.save_episode()
+        recorder._record_episode(cfg, stepper, source, abandoned.dataset, "reach", 2)  # never saved
+        assert load_offline(cfg.root, "test/session", monkeypatch).num_episodes == 2
+        cfg.resume = True
+        session = recorder.open_recording(cfg, features, horizon=None)
+        recorder._record_episode(cfg, stepper, source, session.dataset, "reach", 2)
+        session.save_episode()
+        session.close()
     finally:
         vec.close()
-    assert has_checkpoint(cfg.root)
-    assert restore_checkpoint(cfg.root) == 3
-    assert not has_checkpoint(cfg.root)
-    ds = load_offline(cfg.root, "test/ahead", monkeypatch)
+    assert not (cfg.root / JOURNAL_DIR).exists()
+    ds = load_offline(cfg.root, "test/session", monkeypatch)
     assert (ds.num_episodes, len(ds)) == (3, 3 * F)
+    assert [int(e) for e in ds.hf_dataset["episode_index"]] == [e for e in range(3) for _ in range(F)]
 
 
 def test_resume_appends_with_fresh_seeds(tmp_path, monkeypatch):

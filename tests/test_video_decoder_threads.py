@@ -1,8 +1,11 @@
-"""``video_decoder_threads``: the policy sets how many threads FFmpeg gives each video decoder opened afterwards
-(LeRobot's pyav reader included), forked loader workers inherit it, and the decoded frames stay bit-identical."""
+"""``video_decoder_threads``: how many threads FFmpeg gives each video decoder opened afterwards (LeRobot's pyav
+reader included), set by lerobot-indicator-train's flag or, under LeRobot's CLIs, by an environment variable
+read when the plugin is imported; forked loader workers inherit it, and the decoded frames stay bit-identical."""
 
 import multiprocessing
 import os
+import subprocess
+import sys
 
 import av
 import numpy as np
@@ -11,11 +14,9 @@ import torch
 from lerobot.datasets.video_utils import decode_video_frames_pyav
 
 from benchmarks.speed.updates import STATE_FEATURES, make_policy
-from lerobot_indicator.data.video_decoder_threads import ffmpeg_cores, set_video_decoder_threads
-from lerobot_indicator.policy.configuration_indicator_ddpg import (
-    IndicatorDDPGConfig,
-    IndicatorDDPGConfigError,
-)
+from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.process import VIDEO_DECODER_THREADS_ENV, ffmpeg_cores, set_video_decoder_threads
+from lerobot_indicator.training.config import OnlineTrainConfig
 
 FPS = 20
 
@@ -79,8 +80,9 @@ def _child_cores(queue) -> None:
     queue.put(ffmpeg_cores())
 
 
-def test_policy_applies_the_setting_and_forked_workers_inherit_it():
-    make_policy(STATE_FEATURES)  # default video_decoder_threads=1
+def test_forked_workers_inherit_the_setting_and_a_policy_leaves_it_alone():
+    set_video_decoder_threads(1)
+    make_policy(STATE_FEATURES)
     assert ffmpeg_cores() == 1
     ctx = multiprocessing.get_context("fork")
     queue = ctx.Queue()
@@ -88,12 +90,41 @@ def test_policy_applies_the_setting_and_forked_workers_inherit_it():
     worker.start()
     assert queue.get(timeout=60) == 1
     worker.join(timeout=60)
-    make_policy(STATE_FEATURES, video_decoder_threads=None)  # FFmpeg's choice again
+    set_video_decoder_threads(None)
+    make_policy(STATE_FEATURES)
     assert ffmpeg_cores() == len(os.sched_getaffinity(0))
 
 
-def test_a_bad_thread_count_names_the_field():
-    with pytest.raises(IndicatorDDPGConfigError, match="video_decoder_threads must be None .* got 0"):
-        IndicatorDDPGConfig(video_decoder_threads=0)
+CORES_AFTER_PLUGIN_IMPORT = """
+import lerobot_indicator
+from lerobot_indicator.process import ffmpeg_cores
+print(ffmpeg_cores())
+"""
+
+
+def cores_after_plugin_import(value: str | None) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != VIDEO_DECODER_THREADS_ENV}
+    if value is not None:
+        env[VIDEO_DECODER_THREADS_ENV] = value
+    return subprocess.run(
+        [sys.executable, "-c", CORES_AFTER_PLUGIN_IMPORT], capture_output=True, text=True, env=env
+    )
+
+
+def test_environment_variable_sets_the_threads_when_the_plugin_is_imported():
+    """What lerobot-train users set (docs/policy.md, "Process settings"); unset, FFmpeg keeps its choice."""
+    assert cores_after_plugin_import("1").stdout.split()[-1] == "1"
+    assert cores_after_plugin_import(None).stdout.split()[-1] == str(len(os.sched_getaffinity(0)))
+    bad = cores_after_plugin_import("0")
+    assert (
+        bad.returncode != 0
+        and f"{VIDEO_DECODER_THREADS_ENV} must be a thread count >= 1, got '0'" in bad.stderr
+    )
+
+
+def test_a_bad_thread_count_names_the_flag():
+    cfg = OnlineTrainConfig(env=None, policy=IndicatorDDPGConfig(device="cpu"), video_decoder_threads=0)
+    with pytest.raises(ValueError, match=r"--video_decoder_threads must be null .* or >= 1, got 0"):
+        cfg.validate()
     with pytest.raises(ValueError, match="video_decoder_threads must be None or >= 0, got -1"):
         set_video_decoder_threads(-1)

@@ -194,6 +194,7 @@ def ours_cli(learner: str, seed: int, s: Settings, steps: int) -> list[str]:
         "--policy.type=indicator_ddpg",
         "--policy.device=cpu",
         "--policy.push_to_hub=false",
+        f"--cpu_threads={s.threads}",
         f"--policy.learning_rate={s.lr}",
         f"--policy.noise_eps={s.noise}",
         *METHODS[OURS[learner]],
@@ -259,11 +260,12 @@ class EvalCurve:
 
 
 def run_ours(learner: str, seed: int, s: Settings) -> dict:
-    from lerobot_indicator.training.online import OnlineTrainer
+    from lerobot_indicator.training.online import OnlineTrainer, apply_process_settings
 
     timing = EvalCurve()
     with tempfile.TemporaryDirectory() as tmp:
         trainer = OnlineTrainer(ours_config(learner, seed, s, Path(tmp) / "run", s.steps()), timing.hooks())
+        apply_process_settings(trainer.cfg)  # as lerobot-indicator-train does
         try:
             trainer.train()
         finally:
@@ -300,7 +302,7 @@ def run_in_subprocess(learner: str, seed: int, s: Settings) -> dict:
 def time_update_arms(learner: str, sb3, s: Settings) -> tuple[dict[str, list[float]], dict[str, float]]:
     """Seconds per block of ``updates_per_block`` gradient steps for each arm: ours (eager), ours with
     ``--policy.compile_model=true`` when ``compile`` is set, and SB3; and the matmul FLOPs per update."""
-    from lerobot_indicator.training.online import OnlineTrainer, cycle_episode_seeds
+    from lerobot_indicator.training.online import OnlineTrainer, apply_process_settings, cycle_episode_seeds
 
     n = s.updates_per_block
     variants = {"ours": False, **({"ours_compiled": True} if s.compile else {})}
@@ -311,6 +313,7 @@ def time_update_arms(learner: str, sb3, s: Settings) -> tuple[dict[str, list[flo
             cfg.online.updates_per_cycle = n
             cfg.policy.compile_model = compiled
             trainer = OnlineTrainer(cfg)
+            apply_process_settings(cfg)
             g = torch.Generator().manual_seed(0)
             for cycle in range(s.fill_episodes // s.episodes_per_cycle):
                 seeds = cycle_episode_seeds(cfg.seed, cycle, s.episodes_per_cycle)

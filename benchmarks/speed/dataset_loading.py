@@ -28,8 +28,8 @@ from datasets.features import image as hf_image
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.datasets.video_utils import decode_video_frames_pyav
 
-from lerobot_indicator.data.video_decoder_threads import ffmpeg_cores, set_video_decoder_threads
 from lerobot_indicator.keys import goal_key
+from lerobot_indicator.process import ffmpeg_cores, set_video_decoder_threads
 
 
 @contextmanager

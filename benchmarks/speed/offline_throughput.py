@@ -20,6 +20,7 @@ from benchmarks.speed.dataset_loading import (
     equality_errors,
     loading_rates,
 )
+from lerobot_indicator import process
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
 BIN = Path(sys.executable).parent
@@ -30,28 +31,37 @@ PARTS = ["getitem", "decoder", "equality", "lerobot_train", "offline"]
 ONE_FRAME = "video_one_frame_per_key"
 
 
-def run(cmd: list[str]) -> str:
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=ENV)
+def run(cmd: list[str], env: dict[str, str] | None = None) -> str:
+    proc = subprocess.run(cmd, capture_output=True, text=True, env={**ENV, **(env or {})})
     if proc.returncode != 0:
         raise RuntimeError(f"{shlex.join(cmd)} failed:\n{proc.stderr[-3000:]}")
     return proc.stdout + proc.stderr
 
 
 def lerobot_train(
-    root: Path, out: Path, batch_size: int, steps: int, num_workers: int, extra: list[str] | None = None
+    root: Path,
+    out: Path,
+    batch_size: int,
+    steps: int,
+    num_workers: int,
+    extra: list[str] | None = None,
+    env: dict[str, str] | None = None,
 ) -> dict:
+    """``lerobot-train`` with the process settings of ``env`` (default ``process.environment()``: those
+    lerobot-indicator-train applies by default, docs/policy.md "Process settings")."""
+    env = process.environment() if env is None else env
     cmd = [str(BIN / "lerobot-train"), "--policy.type=indicator_ddpg", "--policy.push_to_hub=false",
            "--policy.device=cpu", f"--dataset.repo_id={REPO}", f"--dataset.root={root}",
            "--dataset.video_backend=pyav", f"--batch_size={batch_size}", f"--steps={steps}", "--log_freq=1",
            f"--num_workers={num_workers}", "--save_checkpoint=false", "--wandb.enable=false",
            f"--output_dir={out}", *(extra or [])]  # fmt: skip
-    log = run(cmd)
+    log = run(cmd, env)
     # The first two steps hold the loader's start (workers, accelerate's one-batch look-ahead).
     data_s = [float(x) for x in re.findall(r"data_s:([0-9.]+)", log)][2:]
     updt_s = [float(x) for x in re.findall(r"updt_s:([0-9.]+)", log)][2:]
     step_s = (sum(data_s) + sum(updt_s)) / len(data_s)
     return {
-        "command": shlex.join(["lerobot-train", *cmd[1:]]),
+        "command": " ".join([*(f"{k}={v}" for k, v in env.items()), shlex.join(["lerobot-train", *cmd[1:]])]),
         "steps_averaged": len(data_s),
         "data_s_per_step": sum(data_s) / len(data_s),
         "update_s_per_step": sum(updt_s) / len(updt_s),
@@ -60,23 +70,25 @@ def lerobot_train(
     }
 
 
-def train_run_spec(spec: str) -> tuple[str, int, list[str], str]:
+def train_run_spec(spec: str) -> tuple[str, int, list[str], dict[str, str], str]:
     """``storage:workers[:start_method[:decoder_threads]]`` -> storage, workers, extra ``lerobot-train`` flags,
-    record name. ``start_method``: ``fork`` / ``spawn`` (``--dataloader_multiprocessing_context``; default
-    LeRobot's); ``decoder_threads``: ``--policy.video_decoder_threads`` (``auto`` = FFmpeg's choice)."""
+    its process settings (``process.environment``), record name. ``start_method``: ``fork`` / ``spawn``
+    (``--dataloader_multiprocessing_context``; default LeRobot's); ``decoder_threads``: the
+    ``LEROBOT_INDICATOR_VIDEO_DECODER_THREADS`` it runs with (``auto`` = unset: FFmpeg's choice; default 1)."""
     parts = spec.split(":")
     if not 2 <= len(parts) <= 4 or parts[0] not in ("png", "video") or not parts[1].isdigit():
         raise ValueError(f"run {spec!r}: expected png|video:<workers>[:fork|spawn[:<threads>|auto]]")
     storage, workers, *rest = parts
-    extra, name = [], f"{storage}_workers{workers}"
+    extra, name, threads = [], f"{storage}_workers{workers}", 1
     if rest:
         extra.append(f"--dataloader_multiprocessing_context={rest[0]}")
         name += f"_{rest[0]}"
     if len(rest) == 2:
-        threads = "null" if rest[1] == "auto" else rest[1]
-        extra.append(f"--policy.video_decoder_threads={threads}")
+        if rest[1] != "auto" and not rest[1].isdigit():
+            raise ValueError(f"run {spec!r}: expected png|video:<workers>[:fork|spawn[:<threads>|auto]]")
+        threads = None if rest[1] == "auto" else int(rest[1])
         name += f"_decoder_threads_{rest[1]}"
-    return storage, int(workers), extra, name
+    return storage, int(workers), extra, process.environment(video_decoder_threads=threads), name
 
 
 def measure_getitem(roots: dict[str, Path], samples: int) -> tuple[dict, dict]:

@@ -12,14 +12,13 @@ from __future__ import annotations
 import itertools
 import time
 from collections.abc import Callable
-from unittest import mock
 
 import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.policies.gaussian_actor import GaussianActorConfig, GaussianActorPolicy
 from lerobot.rl.algorithms.sac import SACAlgorithm, SACAlgorithmConfig
 from lerobot.utils.constants import ACTION
-from torch.utils.flop_counter import FlopCounterMode, conv_flop_count, register_flop_formula
+from torch.utils.flop_counter import FlopCounterMode
 
 from benchmarks.speed.updates import (
     STATE_FEATURES,
@@ -28,7 +27,6 @@ from benchmarks.speed.updates import (
     policy_update,
     rgbd_features,
 )
-from lerobot_indicator.policy import networks_indicator_ddpg
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
 
 IMAGE_KEY = "observation.images.front"
@@ -245,15 +243,6 @@ def measure_peaks(seconds: float = 2.0, device: str = "cpu") -> dict[str, float]
     return results
 
 
-if hasattr(torch.ops.mkldnn, "_convolution_pointwise"):
-
-    @register_flop_formula(torch.ops.mkldnn._convolution_pointwise)
-    def _fused_conv_flops(x_shape, w_shape, *_args, out_shape=None, **_kwargs) -> int:
-        """The fused CPU conv + ReLU (``networks_indicator_ddpg.conv_relu``) counts as its convolution; its
-        backward calls ``convolution_backward``, which FlopCounterMode already counts."""
-        return conv_flop_count(x_shape, w_shape, out_shape, transposed=False)
-
-
 def _count_flops(fn: Callable[[], object]) -> int:
     """FlopCounterMode FLOPs of one ``fn()`` call."""
     counter = FlopCounterMode(display=False)
@@ -277,18 +266,6 @@ ENCODERS = {
     "drq_light": {"image_encoder": "drq", "conv_channels": [8, 16, 32, 32], "conv_strides": [2, 2, 2, 1]},
 }
 COMPILED = "_compiled"
-# "drq" with each conv and its ReLU as the plain ops instead of one fused oneDNN primitive.
-UNFUSED = "drq_unfused_conv_relu"
-
-
-def without_fused_conv_relu(step: Callable[[], None]) -> Callable[[], None]:
-    """``step`` with ``conv_relu`` taking the plain conv2d + relu, as on a torch build without the fused op."""
-
-    def run() -> None:
-        with mock.patch.object(networks_indicator_ddpg, "_fused_conv_relu_available", lambda: False):
-            step()
-
-    return run
 
 
 def make_arms(device: str, sizes: list[int], batch_size: int, **common: object) -> dict:
@@ -299,10 +276,6 @@ def make_arms(device: str, sizes: list[int], batch_size: int, **common: object) 
         for name, config in ENCODERS.items():
             batch = make_batch(features, batch_size, device, n_step=config.get("n_step", 1))
             arms[f"{name}_{size}px"] = policy_update(make_policy(features, device, **config, **common), batch)
-        batch = make_batch(features, batch_size, device)
-        arms[f"{UNFUSED}_{size}px"] = without_fused_conv_relu(
-            policy_update(make_policy(features, device, **ENCODERS["drq"], **common), batch)
-        )
         arms[f"lerobot_sac_{size}px"] = make_sac_update(
             (4, size, size), batch_size, device, freeze_vision_encoder=False
         )

@@ -38,8 +38,7 @@ from benchmarks.speed.offline_throughput import (
     run,
     train_run_spec,
 )
-from lerobot_indicator.data.video_decoder_threads import set_video_decoder_threads
-from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.process import set_video_decoder_threads
 
 
 def main() -> None:
@@ -62,8 +61,8 @@ def main() -> None:
     parser.add_argument("--video_root", type=Path, default=None)
     args = parser.parse_args()
     torch.set_num_threads(1)
-    # The reader parts decode as lerobot-train's fork workers do with the policy's default.
-    decoder_threads = IndicatorDDPGConfig.video_decoder_threads
+    # The reader parts decode as lerobot-train's fork workers do under process.environment()'s default.
+    decoder_threads = 1
     set_video_decoder_threads(decoder_threads)
     env_args = ["--env.type=sawyer_reach", "--env.obs_type=rgbd", f"--env.camera.height={args.size}",
                 f"--env.camera.width={args.size}"]  # fmt: skip
@@ -106,9 +105,15 @@ def main() -> None:
             else:
                 record["lerobot_train"] = {}
                 for spec in args.runs:
-                    storage, workers, extra, name = train_run_spec(spec)
+                    storage, workers, extra, env, name = train_run_spec(spec)
                     record["lerobot_train"][name] = lerobot_train(
-                        roots[storage], Path(tmp) / f"lt_{name}", args.batch_size, args.steps, workers, extra
+                        roots[storage],
+                        Path(tmp) / f"lt_{name}",
+                        args.batch_size,
+                        args.steps,
+                        workers,
+                        extra,
+                        env,
                     )
                     save()
             save()

@@ -24,13 +24,13 @@ from benchmarks.speed.dataset_loading import bench_dataset
 from benchmarks.speed.peers import (
     COMPILED,
     ENCODERS,
-    UNFUSED,
     make_arms,
     matmul_conv_flops,
     measure_peaks,
 )
 from benchmarks.speed.updates import interleaved_rates
 from lerobot_indicator.policy.networks_indicator_ddpg import native_bf16
+from lerobot_indicator.process import keep_freed_memory
 
 
 def main() -> None:
@@ -44,13 +44,15 @@ def main() -> None:
     parser.add_argument(
         "--return-freed-memory",
         action="store_true",
-        help="build the policies with keep_freed_memory=false (glibc's default allocator behaviour)",
+        help="leave glibc's allocator at its defaults (no lerobot_indicator.process.keep_freed_memory)",
     )
     parser.add_argument("--out", type=Path, default=Path("docs/results/policy_updates.json"))
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    arms = make_arms(args.device, args.sizes, args.batch_size, keep_freed_memory=not args.return_freed_memory)
+    if not args.return_freed_memory:  # as lerobot-indicator-train's default --keep_freed_memory=true
+        keep_freed_memory()
+    arms = make_arms(args.device, args.sizes, args.batch_size)
     flops = {name: matmul_conv_flops(step) for name, step in arms.items() if COMPILED not in name}
     flops.update({name: flops[name.replace(COMPILED, "")] for name in arms if COMPILED in name})
     results = interleaved_rates(arms, args.seconds)
@@ -62,9 +64,7 @@ def main() -> None:
         r["share_of_best_measured_peak"] = r["gflop_per_s"] / peak
     ratios = {}
     for size in args.sizes:
-        rate = {
-            name: results[f"{name}_{size}px"]["updates_per_s"] for name in (*ENCODERS, UNFUSED, "lerobot_sac")
-        }
+        rate = {name: results[f"{name}_{size}px"]["updates_per_s"] for name in (*ENCODERS, "lerobot_sac")}
         ratios[f"{size}px"] = {
             "drq_over_paper": rate["drq"] / rate["paper"],
             "drq_over_paper_fp32": rate["drq"] / rate["paper_fp32"],
@@ -75,7 +75,6 @@ def main() -> None:
             "drq_over_lerobot_sac": rate["drq"] / rate["lerobot_sac"],
             "drq_light_over_paper": rate["drq_light"] / rate["paper"],
             "drq_bf16_over_fp32": rate["drq"] / rate["drq_fp32"],
-            "drq_fused_over_unfused_conv_relu": rate["drq"] / rate[UNFUSED],
         }
     device_name = torch.cuda.get_device_name() if args.device.startswith("cuda") else cpu_model()
     record = {

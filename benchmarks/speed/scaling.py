@@ -177,7 +177,7 @@ def learner_updates(args: list[str], backends: list[str], repeats: int, out: Pat
     short runs of the real trainer (``train()``); also whole-cycle rates (collection included)."""
     import ray
 
-    from lerobot_indicator.training.online import OnlineTrainer
+    from lerobot_indicator.training.online import OnlineTrainer, apply_process_settings
 
     if "ray" in backends:
         start_ray(2, nice)  # the trainers' pools use it (RayRollouts joins a running instance)
@@ -189,6 +189,7 @@ def learner_updates(args: list[str], backends: list[str], repeats: int, out: Pat
         for backend in backends:
             cfg = make_config([*args, f"--online.backend={backend}"], out / f"{backend}_{r}")
             trainer = OnlineTrainer(cfg)
+            apply_process_settings(cfg)  # as lerobot-indicator-train does
             spent, optimise = [], trainer.optimise
 
             def timed(rng, generator, optimise=optimise, spent=spent):

@@ -34,9 +34,7 @@ STATE_FEATURES: Features = {"observation.state": (FeatureType.STATE, (3,))}
 
 
 def make_policy(features: Features, device: str = "cpu", **config: object) -> IndicatorDDPGPolicy:
-    # cpu_threads=None: the caller (a benchmark) owns the thread setting.
-    defaults = {"horizon": 25, "cpu_threads": None}
-    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), **{**defaults, **config})
+    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), **{"horizon": 25, **config})
     cfg.input_features = {}
     for key, (ftype, shape) in features.items():
         cfg.input_features[key] = cfg.input_features[goal_key(key)] = PolicyFeature(ftype, shape)

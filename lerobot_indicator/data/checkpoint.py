@@ -1,13 +1,13 @@
-"""Crash safety of recorded datasets: staged per-episode commits, and rollback checkpoints.
+"""Crash safety of a recorded dataset: LeRobot's writer works in a stage and every saved episode is committed
+to the dataset at once. The one mechanism behind the recorder CLI and the online trainer's ``--record.*``.
 
-``LeRobotDataset`` keeps parquet writers open until ``finalize()`` (no footer before that), writes a
-new episode's rows before its metadata, and rewrites ``meta/info.json``/``stats.json``/``tasks.parquet``
-in place, so a dataset it is writing into is unreadable (or inconsistent) between those steps.
-
-**Staged commits** (``lerobot-indicator-record``): LeRobot's writer works in ``<root>/.recording/stage``,
-a dataset root of its own that starts from a copy of ``<root>``'s metadata files (:func:`prepare_stage`),
-and it starts new data, episode-metadata and video files for every episode. After each
-``save_episode`` the recorder closes those files and :func:`commit_episode` brings them into ``<root>``:
+``LeRobotDataset`` keeps parquet writers open until ``finalize()`` (no footer before that), writes a new
+episode's rows before its metadata, and rewrites ``meta/info.json``/``stats.json``/``tasks.parquet`` in
+place, so a dataset it is writing into is unreadable (or inconsistent) between those steps. Hence
+:class:`StagedRecording`: LeRobot's writer works in ``<root>/.recording/stage``, a dataset root of its own
+that starts empty or from a copy of ``<root>``'s metadata files (:func:`prepare_stage`), and it starts new
+data, episode-metadata and video files for every episode. After each ``save_episode`` those files are
+closed and :func:`commit_episode` brings them into ``<root>``:
 
 1. the new metadata files are prepared in ``<root>/.recording/publish`` and the commit is described
    in ``<root>/.recording/commit.json``;
@@ -17,23 +17,15 @@ and it starts new data, episode-metadata and video files for every episode. Afte
 3. ``tasks.parquet``, ``stats.json`` and, last, ``info.json`` are replaced atomically: ``info.json`` is
    the commit point.
 
-``<root>`` is thus a complete dataset at every instant and LeRobot reads it as it is, whatever ends
-the recorder (between steps 2 and 3 it still reads as the previous state: the new rows come after the
+``<root>`` is thus a complete dataset at every instant and LeRobot reads it as it is, whatever ends the
+writer (between steps 2 and 3 it still reads as the previous state: the new rows come after the
 ``total_frames`` it counts). :func:`recover_recording` finishes a commit that ``commit.json`` describes
-(nothing is rolled back) and drops the stage, which holds at most the episode that was in flight.
-
-**Rollback checkpoints** (the online trainer's ``--record.*``, which writes straight into ``<root>``):
-at checkpoints the dataset is finalized and :func:`write_checkpoint` journals that consistent state
-(``<root>/.recording/checkpoint.json``: every file plus the bytes of the three rewritten meta files).
-After finalize, LeRobot's ``resume`` always opens *new* data/episode/video files, so the listed files
-are never modified later. :func:`restore_checkpoint` keeps the dataset as it is when it is consistent by
-itself (e.g. finalized after an exception or Ctrl-C), else rolls it back to the checkpoint: deleting
-unlisted files and restoring the three meta files. The journal is removed after a clean finish.
+(nothing is rolled back) and drops the stage, which holds at most the episode that was being saved.
 """
 
 from __future__ import annotations
 
-import base64
+import contextlib
 import filecmp
 import json
 import logging
@@ -41,32 +33,23 @@ import os
 import shutil
 from pathlib import Path
 
-import pyarrow.parquet as pq
+import PIL.Image
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from lerobot_indicator.data.storage import video_encoders
 
 JOURNAL_DIR = ".recording"
-JOURNAL_FILE = "checkpoint.json"
 STAGE_DIR = "stage"
 PUBLISH_DIR = "publish"
 COMMIT_FILE = "commit.json"
 INFO = "meta/info.json"
-REWRITTEN_META = (INFO, "meta/stats.json", "meta/tasks.parquet")
+# What LeRobot's ``resume`` reads besides the last episode-metadata file.
+RESUME_META = (INFO, "meta/stats.json", "meta/tasks.parquet")
 # Directories where LeRobot starts new files, in commit order: videos and data rows before the
 # episode metadata that refers to them.
 NEW_FILE_DIRS = ("videos", "data", "meta/episodes")
 # Replaced in this order: info.json (the episode count) last.
 COMMITTED_META = ("meta/tasks.parquet", "meta/stats.json", INFO)
-
-
-def _journal_path(root: Path) -> Path:
-    return Path(root) / JOURNAL_DIR / JOURNAL_FILE
-
-
-def _dataset_files(root: Path) -> list[str]:
-    return sorted(
-        p.relative_to(root).as_posix()
-        for p in root.rglob("*")
-        if p.is_file() and p.relative_to(root).parts[0] != JOURNAL_DIR
-    )
 
 
 def write_atomic(path: Path, content: str | bytes) -> None:
@@ -86,7 +69,7 @@ def info_json(info: dict) -> str:
     return json.dumps(info, indent=4, ensure_ascii=False)
 
 
-# ---------------- staged per-episode commits ----------------
+# ---------------- the commit protocol (files only) ----------------
 
 
 def stage_root(root: Path) -> Path:
@@ -94,14 +77,14 @@ def stage_root(root: Path) -> Path:
 
 
 def prepare_stage(root: Path) -> Path:
-    """A fresh stage for resuming ``root``: what LeRobot's ``resume`` reads (``info.json``, ``stats.json``,
-    ``tasks.parquet``) and the last episode-metadata file (its last row tells the writer where the next
-    episode goes). Copies, never links: LeRobot rewrites the meta files in place."""
+    """A fresh stage for resuming ``root``: the files of :data:`RESUME_META` and the last episode-metadata
+    file (its last row tells the writer where the next episode goes). Copies, never links: LeRobot rewrites
+    the meta files in place."""
     root = Path(root)
     stage = stage_root(root)
     shutil.rmtree(stage, ignore_errors=True)
     (stage / "meta").mkdir(parents=True)
-    for rel in REWRITTEN_META:
+    for rel in RESUME_META:
         if (root / rel).exists():
             shutil.copyfile(root / rel, stage / rel)
     episode_files = sorted((root / "meta" / "episodes").glob("*/*.parquet"))
@@ -165,11 +148,6 @@ def _link(src: Path, dst: Path) -> None:
         os.replace(tmp, dst)
 
 
-def _link_files(root: Path, stage: Path, rels: list[str]) -> None:
-    for rel in rels:
-        _link(stage / rel, root / rel)
-
-
 def _replace_meta(root: Path, publish: Path, rels: list[str]) -> None:
     for rel in rels:
         if (publish / rel).exists():  # else already replaced by an earlier try of this commit
@@ -189,7 +167,8 @@ def apply_commit(root: Path) -> int | None:
     except json.JSONDecodeError:  # cut short while being written: nothing of it was applied
         path.unlink()
         return None
-    _link_files(root, stage_root(root), commit["link"])
+    for rel in commit["link"]:
+        _link(stage_root(root) / rel, root / rel)
     _replace_meta(root, journal / PUBLISH_DIR, commit["replace"])
     path.unlink()
     return int(commit["total_episodes"])
@@ -205,9 +184,9 @@ def discard_stage(root: Path) -> None:
 
 
 def recover_recording(root: Path) -> int | None:
-    """After an interrupted staged recording: finish its last commit if it was cut short, drop the
-    stage (the episode that was in flight). Never removes a committed episode. Returns the episode count
-    of a finished commit, ``None`` if there was none to finish."""
+    """After an interrupted recording: finish its last commit if it was cut short, drop the stage (the
+    episode being saved). Never removes a committed episode. Returns the episode count of a finished
+    commit, ``None`` if there was none to finish."""
     root = Path(root)
     finished = apply_commit(root)
     if finished is not None:
@@ -227,94 +206,133 @@ def committed_counts(root: Path) -> tuple[int, int]:
     return int(info["total_episodes"]), int(info["total_frames"])
 
 
-# ---------------- rollback checkpoints ----------------
+# ---------------- LeRobot's writer in the stage ----------------
 
 
-def is_consistent(root: Path) -> bool:
-    """Whether ``root`` is a complete dataset by itself: every data and episode-metadata parquet file has
-    its footer, ``info.json`` counts exactly their rows, and every video file they refer to exists."""
-    root = Path(root)
-    try:
-        info = json.loads((root / INFO).read_text())
-        if (root / "meta" / "stats.json").exists():
-            json.loads((root / "meta" / "stats.json").read_text())
-        if (root / "meta" / "tasks.parquet").exists():
-            pq.read_metadata(root / "meta" / "tasks.parquet")
-        data_rows = sum(pq.read_metadata(p).num_rows for p in (root / "data").glob("*/*.parquet"))
-        episodes = [pq.read_table(p) for p in sorted((root / "meta" / "episodes").glob("*/*.parquet"))]
-        if sum(t.num_rows for t in episodes) != info["total_episodes"] or data_rows != info["total_frames"]:
-            return False
-        video_path = info.get("video_path")
-        for table in episodes:
-            keys = {c.split("/")[1] for c in table.column_names if c.startswith("videos/")}
-            for key in keys:
-                chunks = table.column(f"videos/{key}/chunk_index").to_pylist()
-                files = table.column(f"videos/{key}/file_index").to_pylist()
-                for chunk, file in zip(chunks, files, strict=True):
-                    if not (
-                        root / video_path.format(video_key=key, chunk_index=chunk, file_index=file)
-                    ).exists():
-                        return False
-    except Exception:  # any unreadable or missing piece: not consistent
-        return False
-    return True
+class CorruptFrameError(RuntimeError):
+    """An image/video frame file of the episode being saved cannot be read back."""
 
 
-def write_checkpoint(root: Path, total_episodes: int) -> None:
-    """Record the current (finalized, consistent) state of the dataset at ``root``. Atomic."""
-    root = Path(root)
-    meta = {
-        rel: base64.b64encode((root / rel).read_bytes()).decode()
-        for rel in REWRITTEN_META
-        if (root / rel).exists()
-    }
-    state = {"total_episodes": total_episodes, "files": _dataset_files(root), "meta": meta}
-    write_atomic(_journal_path(root), json.dumps(state))  # the commit point: the old or the new checkpoint
+def verify_frames(dataset: LeRobotDataset) -> None:
+    """Every image/video frame file of the buffered episode decodes (LeRobot's image writer only logs a
+    failed write, and would embed or encode whatever is on disk)."""
+    writer = dataset.writer
+    if writer.image_writer is not None:
+        writer.image_writer.wait_until_done()
+    episode = dataset.meta.total_episodes
+    for key in dataset.meta.camera_keys:
+        for frame, path in enumerate(writer.episode_buffer.get(key, [])):
+            if path is None:  # fed to a streaming video encoder, never written as a file
+                continue
+            try:
+                with PIL.Image.open(path) as image:
+                    image.load()
+            except Exception as err:
+                reason = " ".join(str(err).split()) or type(err).__name__
+                raise CorruptFrameError(
+                    f"episode {episode}, frame {frame}: {key} cannot be read back from {path} ({reason}); "
+                    "the episode was not saved"
+                ) from err
 
 
-def has_checkpoint(root: Path) -> bool:
-    return _journal_path(root).exists()
+def _close_episode_files(dataset: LeRobotDataset) -> None:
+    """Close the data and episode-metadata parquet files of the episode just saved (their footers written).
 
-
-def restore_checkpoint(root: Path) -> int | None:
-    """Bring an interrupted recording back to a consistent state; returns its episode count.
-
-    A dataset that is consistent by itself (see :func:`is_consistent`) is kept as it is, episodes after
-    the checkpoint included; otherwise it is rolled back to the checkpoint. Returns ``None`` when there is
-    no journal (the last recording ended cleanly).
+    LeRobot closes them only in ``finalize()``, which also ends the writer (``finalize()`` + ``resume()`` per
+    episode would rebuild the writer and reload its metadata through an Arrow cache every time). The data
+    file has the public ``DatasetWriter.close_writer()``; the episode metadata has no public counterpart, so
+    this is the one place that calls LeRobot's private ``LeRobotDatasetMetadata._close_writer()`` (which
+    flushes the buffered rows, then closes the file).
     """
-    root = Path(root)
-    path = _journal_path(root)
-    if not path.exists():
-        return None
-    state = json.loads(path.read_text())
-    if is_consistent(root):
-        path.unlink()
-        kept, _ = committed_counts(root)
-        logging.warning(
-            "The interrupted recording at %s is consistent: kept all its %d episodes (%d at its last "
-            "checkpoint).",
-            root,
-            kept,
-            state["total_episodes"],
+    dataset.writer.close_writer()
+    dataset.meta._close_writer()
+
+
+class StagedRecording:
+    """LeRobot's writer working in the stage of ``root``; :meth:`save_episode` saves and commits.
+
+    Open it with :meth:`create` (a new dataset) or :meth:`resume` (after :func:`recover_recording`), fill
+    ``dataset``'s episode buffer with ``add_frame``, then call :meth:`save_episode` per episode and
+    :meth:`close` once.
+    """
+
+    def __init__(self, root: Path, dataset: LeRobotDataset):
+        self.root = Path(root)
+        self.dataset = dataset
+        info = dataset.meta.info
+        # The dataset's own file size limits, written to the committed info.json.
+        self.file_sizes = {
+            "data_files_size_in_mb": info.data_files_size_in_mb,
+            "video_files_size_in_mb": info.video_files_size_in_mb,
+        }
+        # With limits of 0, LeRobot starts new data, episode-metadata and video files for every episode,
+        # so an episode's files can be closed and committed while the next ones go elsewhere (LeRobot's
+        # chunk settings API refuses 0). In the stage only: see file_sizes.
+        info.data_files_size_in_mb = 0
+        info.video_files_size_in_mb = 0
+        self.committed = set(staged_files(stage_root(self.root)))
+
+    @classmethod
+    def create(
+        cls, root: Path, repo_id: str, fps: int, features: dict, use_videos: bool, image_writer_threads: int
+    ) -> StagedRecording:
+        """A new, empty dataset at ``root`` (its ``info.json`` is written at once, with 0 episodes)."""
+        dataset = LeRobotDataset.create(
+            repo_id,
+            fps=fps,
+            features=features,
+            root=stage_root(root),
+            use_videos=use_videos,
+            video_backend="pyav",
+            image_writer_threads=image_writer_threads,
+            **video_encoders(),
         )
-        return kept
-    keep = set(state["files"])
-    for rel in _dataset_files(root):
-        if rel not in keep:
-            (root / rel).unlink()
-    for rel, content in state["meta"].items():
-        (root / rel).write_bytes(base64.b64decode(content))
-    for directory in sorted((p for p in root.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts)):
-        if directory.relative_to(root).parts[0] != JOURNAL_DIR and not any(directory.iterdir()):
-            directory.rmdir()
-    logging.warning(
-        "Recovered an interrupted recording at %s: rolled back to its last checkpoint (%d episodes).",
-        root,
-        state["total_episodes"],
-    )
-    return state["total_episodes"]
+        write_atomic(Path(root) / INFO, info_json(dataset.meta.info.to_dict()))
+        return cls(root, dataset)
 
+    @classmethod
+    def resume(cls, root: Path, repo_id: str, image_writer_threads: int) -> StagedRecording:
+        """More episodes for the dataset at ``root``, which :func:`recover_recording` has cleaned up."""
+        stage = prepare_stage(root)
+        try:
+            dataset = LeRobotDataset.resume(
+                repo_id,
+                root=stage,
+                video_backend="pyav",
+                image_writer_threads=image_writer_threads,
+                **video_encoders(),
+            )
+        except BaseException:
+            discard_stage(root)
+            raise
+        return cls(root, dataset)
 
-def clear_checkpoint(root: Path) -> None:
-    shutil.rmtree(Path(root) / JOURNAL_DIR, ignore_errors=True)
+    @property
+    def total_episodes(self) -> int:
+        return self.dataset.meta.total_episodes
+
+    def save_episode(self) -> None:
+        """Save the buffered episode with LeRobot's writer, close its files and commit them to ``root``."""
+        verify_frames(self.dataset)
+        self.dataset.save_episode()
+        _close_episode_files(self.dataset)
+        self.committed = commit_episode(
+            self.root, self.dataset.meta.info.to_dict() | self.file_sizes, self.committed
+        )
+
+    def close(self, clean: bool = True) -> None:
+        """Stop LeRobot's writer and drop the stage (everything it held is committed, or the episode that
+        was being saved); a commit cut short is finished first. Idempotent."""
+        if clean:
+            self.dataset.finalize()
+        else:
+            with contextlib.suppress(Exception):  # waits for (and stops) the image writer threads
+                self.dataset.finalize()
+        recover_recording(self.root)
+
+    def committed_dataset(self) -> LeRobotDataset:
+        """A finalized handle on the dataset at ``root`` (counts, ``push_to_hub``; frames load on first
+        read), opened with LeRobot's ``resume``, which reads the metadata only."""
+        dataset = LeRobotDataset.resume(self.dataset.repo_id, root=self.root, video_backend="pyav")
+        dataset.finalize()
+        return dataset

@@ -9,10 +9,10 @@ data). ``indicator_ddpg`` never samples that frame as ``o_t`` (``drop_n_last_fra
 R+ only if ``o_{t+1}`` equals the episode's goal observation bit for bit on the compared keys.
 See docs/dataset_format.md.
 
-Every saved episode is committed to ``--root`` before the next one starts (data/checkpoint.py): the
-dataset there is complete and readable by ``LeRobotDataset`` at every instant, so an interruption of
-any kind (Ctrl-C, SIGTERM, SIGKILL, a crash) loses at most the episode in flight, and ``--resume=true``
-never removes a saved episode.
+Every saved episode is committed to ``--root`` before the next one starts (data/checkpoint.py, also
+behind the online trainer's ``--record.*``): the dataset there is complete and readable by
+``LeRobotDataset`` at every instant, so an interruption of any kind (Ctrl-C, SIGTERM, SIGKILL, a crash)
+loses at most the episode in flight, and ``--resume=true`` never removes a saved episode.
 """
 
 import contextlib
@@ -27,7 +27,6 @@ from pathlib import Path
 
 import draccus
 import numpy as np
-import PIL.Image
 import pyarrow.parquet as pq
 import torch
 from lerobot.configs import parser
@@ -42,17 +41,12 @@ from lerobot_indicator.data.action_sources import episode_seed, make_action_sour
 from lerobot_indicator.data.checkpoint import (
     INFO,
     JOURNAL_DIR,
-    commit_episode,
+    CorruptFrameError,
+    StagedRecording,
     committed_counts,
     discard_stage,
-    info_json,
-    prepare_stage,
     recover_recording,
-    restore_checkpoint,
-    stage_root,
-    staged_files,
     write_atomic,
-    write_checkpoint,
 )
 from lerobot_indicator.data.features import (
     DONE,
@@ -62,7 +56,7 @@ from lerobot_indicator.data.features import (
     observation_frame,
     unbatch,
 )
-from lerobot_indicator.data.storage import check_depth_range, video_encoders
+from lerobot_indicator.data.storage import check_depth_range
 from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
 from lerobot_indicator.policy.indicator_core import indicator_reward
 from lerobot_indicator.stop_signals import Interrupted, exit_code
@@ -89,9 +83,6 @@ class RecordConfig:
     reward_keys: list[str] | None = None
     r_pos: float = 1.0
     r_neg: float = -1.0
-    # Accepted and unused by this recorder: it commits every episode as it is saved (data/checkpoint.py).
-    # Kept so that command lines passing it still parse.
-    checkpoint_every_s: float = 30.0
     # Threads writing PNG/TIFF frames in the background (LeRobot's AsyncImageWriter; 0 = inline).
     image_writer_threads: int = 4
     push_to_hub: bool = False
@@ -107,8 +98,6 @@ class RecordConfig:
             raise ValueError(f"num_episodes must be > 0, got {self.num_episodes}")
         if self.image_writer_threads < 0:
             raise ValueError(f"image_writer_threads must be >= 0, got {self.image_writer_threads}")
-        if self.checkpoint_every_s < 0:
-            raise ValueError(f"checkpoint_every_s must be >= 0, got {self.checkpoint_every_s}")
         if self.r_pos <= self.r_neg:
             raise ValueError(f"r_pos ({self.r_pos}) must be > r_neg ({self.r_neg})")
         self.root = Path(self.root) if self.root else HF_LEROBOT_HOME / self.repo_id
@@ -162,10 +151,6 @@ class RecordingError(Exception):
 
 class SettingsMismatchError(RecordingError, ValueError):
     """``--resume`` with settings other than those the dataset was recorded with."""
-
-
-class CorruptFrameError(RecordingError, RuntimeError):
-    """An image/video frame file of the episode being saved cannot be read back."""
 
 
 class RecordingInterrupted(Interrupted):
@@ -252,7 +237,7 @@ def _leftover_only(root: Path) -> bool:
     return root.is_dir() and not (root / INFO).exists() and {p.name for p in root.iterdir()} <= {JOURNAL_DIR}
 
 
-def _check_root(cfg: RecordConfig) -> None:
+def check_root(cfg: RecordConfig) -> None:
     """Fail before building anything: never overwrite, never resume nothing."""
     if _leftover_only(cfg.root):  # nothing was saved there: as if it did not exist
         discard_stage(cfg.root)
@@ -321,151 +306,20 @@ def _check_resume(cfg: RecordConfig, features: dict, horizon: int | None) -> Non
             logging.warning("%s has no %s: only fps and the horizon were checked", root, SETTINGS_FILE)
 
 
-def _resume(cfg: RecordConfig) -> LeRobotDataset:
-    return LeRobotDataset.resume(
-        cfg.repo_id,
-        root=cfg.root,
-        video_backend="pyav",
-        image_writer_threads=cfg.image_writer_threads,
-        **video_encoders(),
-    )
-
-
-def checkpoint_dataset(cfg: RecordConfig, dataset: LeRobotDataset) -> LeRobotDataset:
-    """Finalize, journal that consistent state (a later kill rolls back to it), reopen for more episodes."""
-    dataset.finalize()
-    write_checkpoint(cfg.root, dataset.meta.total_episodes)
-    return _resume(cfg)
-
-
-def _create(cfg: RecordConfig, features: dict, root: Path) -> LeRobotDataset:
-    return LeRobotDataset.create(
-        cfg.repo_id,
-        fps=cfg.env.fps,
-        features=features,
-        root=root,
-        use_videos=cfg.use_videos,
-        video_backend="pyav",
-        image_writer_threads=cfg.image_writer_threads,
-        **video_encoders(),
-    )
-
-
-def open_dataset(cfg: RecordConfig, features: dict) -> LeRobotDataset:
-    """A dataset written straight into ``cfg.root`` (the online trainer's ``--record.*``): crash safety
-    comes from :func:`checkpoint_dataset`'s rollback journal. The recorder uses :class:`StagedRecording`."""
-    root = cfg.root
-    _check_root(cfg)
+def open_recording(cfg: RecordConfig, features: dict, horizon: int | None) -> StagedRecording:
+    """The dataset at ``cfg.root`` behind data/checkpoint.py's per-episode commits: created, or with
+    ``cfg.resume`` recovered from any interruption, checked against this run's settings and reopened.
+    Used by :func:`record` and the online trainer's ``--record.*``."""
+    check_root(cfg)
     if not cfg.resume:
-        dataset = _create(cfg, features, root)
-        _write_settings(cfg)
-        return dataset
-    restore_checkpoint(root)  # no-op unless the last recording was killed
-    recover_recording(root)  # no-op unless a staged recording was interrupted
-    _check_resume(cfg, features, horizon=None)
-    return _resume(cfg)
-
-
-def _verify_frames(dataset: LeRobotDataset, episode: int) -> None:
-    """Every image/video frame file of the buffered episode decodes (LeRobot's image writer only logs a
-    failed write, and would embed or encode whatever is on disk)."""
-    writer = dataset.writer
-    if writer.image_writer is not None:
-        writer.image_writer.wait_until_done()
-    for key in dataset.meta.camera_keys:
-        for frame, path in enumerate(writer.episode_buffer.get(key, [])):
-            if path is None:  # fed to a streaming video encoder, never written as a file
-                continue
-            try:
-                with PIL.Image.open(path) as image:
-                    image.load()
-            except Exception as err:
-                reason = " ".join(str(err).split()) or type(err).__name__
-                raise CorruptFrameError(
-                    f"episode {episode}, frame {frame}: {key} cannot be read back from {path} ({reason}); "
-                    "the episode was not saved"
-                ) from err
-
-
-class StagedRecording:
-    """LeRobot's writer working in the stage, each saved episode committed to ``cfg.root`` at once.
-
-    See data/checkpoint.py for the commit protocol; ``cfg.root`` is a complete dataset at every instant.
-    """
-
-    def __init__(self, cfg: RecordConfig, features: dict, horizon: int):
-        self.root = cfg.root
-        if cfg.resume:
-            restore_checkpoint(self.root)  # a rollback journal of the online trainer's --record.*
-            recover_recording(self.root)  # finish a commit cut short, drop an episode in flight
-            _check_resume(cfg, features, horizon)
-            stage = prepare_stage(self.root)
-            try:
-                self.dataset = LeRobotDataset.resume(
-                    cfg.repo_id,
-                    root=stage,
-                    video_backend="pyav",
-                    image_writer_threads=cfg.image_writer_threads,
-                    **video_encoders(),
-                )
-            except BaseException:
-                discard_stage(self.root)
-                raise
-        else:
-            stage = stage_root(self.root)
-            self.dataset = _create(cfg, features, stage)
-            _write_settings(cfg)
-            write_atomic(self.root / INFO, info_json(self.dataset.meta.info.to_dict()))  # 0 episodes
-        info = self.dataset.meta.info
-        self.file_sizes = {
-            "data_files_size_in_mb": info.data_files_size_in_mb,
-            "video_files_size_in_mb": info.video_files_size_in_mb,
-        }
-        # With size limits of 0, LeRobot starts new data, episode-metadata and video files for every
-        # episode, so an episode's files can be closed and committed while the next ones go elsewhere.
-        # In the stage only: the committed info.json keeps the dataset's own limits.
-        info.data_files_size_in_mb = 0
-        info.video_files_size_in_mb = 0
-        self.committed = set(staged_files(stage))
-        self.in_flight: int | None = None  # the episode being stepped (not yet saved)
-
-    @property
-    def total_episodes(self) -> int:
-        return self.dataset.meta.total_episodes
-
-    def save_episode(self, episode: int) -> None:
-        """Save the buffered episode with LeRobot's writer, close its files and commit them."""
-        dataset = self.dataset
-        _verify_frames(dataset, episode)
-        dataset.save_episode()
-        dataset.writer.close_writer()
-        # LeRobot's only way to flush and close the episode-metadata file short of finalize().
-        dataset.meta._close_writer()
-        self.committed = commit_episode(
-            self.root, dataset.meta.info.to_dict() | self.file_sizes, self.committed
+        session = StagedRecording.create(
+            cfg.root, cfg.repo_id, cfg.env.fps, features, cfg.use_videos, cfg.image_writer_threads
         )
-
-    def committed_dataset(self) -> LeRobotDataset:
-        """The finalized writer pointed at ``cfg.root``: a handle on the committed dataset (counts,
-        ``push_to_hub``) like the finalized writer LeRobot itself leaves; its episode table (and the rest
-        of its metadata) is reloaded from ``cfg.root`` when first read, so nothing large is loaded here."""
-        dataset, meta = self.dataset, self.dataset.meta
-        for obj in (dataset, meta):
-            obj.root = obj._requested_root = self.root
-        for name, size in self.file_sizes.items():
-            setattr(meta.info, name, size)
-        meta.episodes = None
-        return dataset
-
-    def close(self, clean: bool) -> None:
-        """Stop LeRobot's writer and drop the stage (everything it held is committed, or the dropped
-        episode); a commit cut short by a second signal is finished first."""
-        if clean:
-            self.dataset.finalize()
-        else:
-            with contextlib.suppress(Exception):  # waits for (and stops) the image writer threads
-                self.dataset.finalize()
-        recover_recording(self.root)
+        _write_settings(cfg)
+        return session
+    recover_recording(cfg.root)  # finish a commit cut short, drop the episode that was being saved
+    _check_resume(cfg, features, horizon)
+    return StagedRecording.resume(cfg.root, cfg.repo_id, cfg.image_writer_threads)
 
 
 def _dataset_card(cfg: RecordConfig) -> str:
@@ -486,7 +340,7 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
     Raises :class:`RecordingInterrupted` (a ``KeyboardInterrupt``) on SIGINT/SIGTERM, after the episode
     being saved (if any) is committed; the episode being stepped is dropped.
     """
-    _check_root(cfg)
+    check_root(cfg)
     vec_env = make_single_env(cfg.env)
     target, session = None, None
     try:
@@ -509,7 +363,7 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
                 raise ValueError(
                     f"policy {cfg.policy!r} gives actions of shape {dry.shape}, env expects {vec_env.action_space.shape}"
                 )
-            session = StagedRecording(cfg, features, _episode_length(vec_env, cfg.env))
+            session = open_recording(cfg, features, _episode_length(vec_env, cfg.env))
             target = session.total_episodes + cfg.num_episodes
             clean = False
             try:
@@ -522,7 +376,7 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
     except KeyboardInterrupt as exc:
         interrupted = exc if isinstance(exc, RecordingInterrupted) else RecordingInterrupted()
         interrupted.target_episodes = target
-        interrupted.dropped_episode = session.in_flight if session is not None else None
+        interrupted.dropped_episode = getattr(exc, "dropped_episode", None)
         if interrupted is exc:
             raise
         raise interrupted from exc
@@ -549,11 +403,13 @@ def _record_episodes(
     bar = tqdm(range(first, first + cfg.num_episodes), desc=f"recording {cfg.repo_id}", unit="episode")
     try:
         for episode in bar:
-            session.in_flight = episode
-            frames += _record_episode(cfg, stepper, actions, session.dataset, task, episode)
-            session.in_flight = None
+            try:
+                frames += _record_episode(cfg, stepper, actions, session.dataset, task, episode)
+            except KeyboardInterrupt as exc:
+                exc.dropped_episode = episode  # for the CLI's last line
+                raise
             with stop.deferred():
-                session.save_episode(episode)
+                session.save_episode()
             stop.check()
             bar.set_postfix(frames=frames, fps=f"{frames / (time.monotonic() - t0):.1f}")
     finally:
@@ -700,7 +556,7 @@ def main(cfg: RecordConfig) -> None:
     except KeyboardInterrupt as exc:
         print(interrupted_message(cfg, exc), file=sys.stderr, flush=True)
         raise SystemExit(exit_code(exc)) from None
-    except RecordingError as exc:
+    except (RecordingError, CorruptFrameError) as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         raise SystemExit(1) from None
     logging.info(

@@ -1,8 +1,16 @@
-"""Configuration of the ``indicator_ddpg`` policy (Lin, Baweja, Held, CoRL 2019, section 5 and appendix)."""
+"""Configuration of the ``indicator_ddpg`` policy (Lin, Baweja, Held, CoRL 2019, section 5 and appendix).
+
+One line per field here; why each default is what it is, and the measurements behind it: docs/policy.md,
+"Config fields".
+"""
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
+import draccus
+from draccus.parsers.encoding import encode_choice, encode_dataclass
+from draccus.utils import is_choice_type
 from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
 from lerobot.optim import AdamConfig, OptimizerConfig
 from lerobot.utils.constants import ACTION
@@ -15,10 +23,7 @@ REWARD_MODES = ("indicator", "oracle", *LEARNED_REWARDS)
 FILTER_Q_SOURCES = ("online", "target")
 FILTER_STARTS = ("always", "calibrated")
 BALANCE_FALLBACKS = ("recorded", "next")
-# Per image encoder: the values of the conv and augmentation fields left at None. "paper": the appendix's
-# 4 conv layers of 2x2 kernels, stride 2, 16/32/64/64 filters (as in the authors' HER code), no augmentation.
-# "drq": DrQ-v2's 3x3 convs and 4-pixel random shift, with a second stride-2 layer and 16 filters in the first
-# two layers (DrQ-v2: 32 everywhere, strides 2/1/1/1), which cut the CPU cost of an update at 64-100 px.
+# Per image encoder: the values of the conv and augmentation fields left at None (docs/policy.md, "Networks").
 ENCODER_PRESETS = {
     "paper": {
         "conv_channels": [16, 32, 64, 64],
@@ -36,6 +41,19 @@ ENCODER_PRESETS = {
 IMAGE_ENCODERS = tuple(ENCODER_PRESETS)
 CONV_PRECISIONS = ("auto", "float32", "bfloat16")
 CRITIC_OUTPUT_SCALES = ("paper", "return")
+# The allowed values of each choice field, checked in this order.
+CHOICES = {
+    "reward": REWARD_MODES,
+    "filter_q": FILTER_Q_SOURCES,
+    "filter_start": FILTER_STARTS,
+    "critic_output_scale": CRITIC_OUTPUT_SCALES,
+    "balance_fallback": BALANCE_FALLBACKS,
+    "image_encoder": IMAGE_ENCODERS,
+    "conv_precision": CONV_PRECISIONS,
+}
+# Keys that checkpoints saved by earlier versions hold and this config ignores: process settings, which the
+# CLIs own (lerobot_indicator/process.py). Loading accepts them; saving never writes them (_encode).
+IGNORED_KEYS = ("cpu_threads", "keep_freed_memory", "video_decoder_threads")
 
 
 class IndicatorDDPGConfigError(Exception):
@@ -47,11 +65,8 @@ class IndicatorDDPGConfigError(Exception):
 @OptimizerConfig.register_subclass("fused_adam")
 @dataclass
 class FusedAdamConfig(AdamConfig):
-    """LeRobot's ``adam`` with torch's fused kernel (``fused=False`` gives plain ``adam``).
-
-    ``AdamConfig.build`` passes every field to ``torch.optim.Adam``. On CPU torch's default Adam loops over
-    the tensors one by one; the fused kernel made a state-based update ~10% faster (docs/results/vs_sb3.json).
-    """
+    """LeRobot's ``adam`` with torch's fused kernel (``fused=False`` gives plain ``adam``); ``AdamConfig.build``
+    passes every field to ``torch.optim.Adam``."""
 
     fused: bool = True
 
@@ -65,140 +80,114 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     (``keys.goal_key``) bit for bit. The networks see exactly these keys and their goals.
     """
 
-    # Compared observation keys; goals are ``goal_key(k)``. Images and states may be mixed. None = every
-    # camera key of the dataset / env that has a goal (never the state when there are cameras: training on
-    # observation.state must be asked for by name), or its state keys when it has no camera.
+    # Inputs and horizon
+    # Compared keys (goals: goal_key(k)); None = the data's camera keys with a goal, else its state keys.
     observation_keys: list[str] | None = None
-
-    # Episode horizon T: gamma = (T-1)/T and the filter threshold q0 follow from it. None = the episode length
-    # of the dataset (lerobot-train) or of the env (lerobot-indicator-train); a given value must match it.
+    # Episode horizon T (gamma = (T-1)/T, q0 follow); None = the dataset's or env's episode length.
     horizon: int | None = None
-
-    # Reward: "indicator" (the paper's method), "oracle" (ground-truth distance <= oracle_epsilon), or a
-    # learned-reward baseline trained jointly on the batch's images (paper appendix): "ae" (max(0, cosine of
-    # the L2-normalised codes)) or "vae" (beta-VAE, -||z - z_g|| of the posterior means).
-    reward: str = "indicator"
-    oracle_epsilon: float = 0.1
-    positive_reward: float = 1.0
-    negative_reward: float = -1.0
-
-    # Relabeling (Algorithm 1). balance=True: p(next)=0.45, p(future t'>=t+2)=0.45, p(recorded)=0.1.
-    # balance=False (the paper's "Indicator" baseline): p(future over {t+1..T})=0.9, p(recorded)=0.1.
-    balance: bool = True
-    p_next: float = 0.45
-    p_future: float = 0.45
-    p_future_unbalanced: float = 0.9
-    # Goal of the balanced future branch when no t' >= t+2 exists (t = T-1; the paper does not say):
-    # "next" uses o_{t+1} = o_T, what clipping t' to T gives (a positive); "recorded" keeps it a mostly negative
-    # example. Matters at short horizons: at T = 3 a third of the transitions have t = T-1, and "recorded"
-    # made rope push worse than no balancing at all (docs/results/README.md).
-    balance_fallback: str = "next"
-    # Reward filtering: drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
-    filter: bool = True
-    # The filter's Q: "online" (the paper: the critic being trained) or "target" (the target critic, which
-    # trails it and is not pulled up by the batch it filters).
-    filter_q: str = "online"
-    # When the filter acts: "always" (the paper) or "calibrated": in a batch only when at least
-    # filter_calibration of its R+ transitions (relabeled positives, whose return is known to be high) have a
-    # filter Q above q0, i.e. once the critic tells positives from negatives at the threshold q0.
-    filter_start: str = "always"
-    filter_calibration: float = 0.9
-    # Initial Q (the critic's output bias). The paper initialises Q "relatively low" so that filtering
-    # is not fooled early; None = R-/(1-gamma), the lowest possible return. Any value well below q0 keeps
-    # filtering safe; see docs/policy.md for the effect on learning speed.
-    q_init: float | None = None
-    # Units of the critic's output layer: "paper" (Q itself) or "return": the MLP predicts (1-gamma) Q, a
-    # per-step reward in [R-, R+], and is scaled by 1/(1-gamma). With Q starting at R-/(1-gamma) and tanh
-    # layers, Adam's fastest way to move Q by tens is to saturate the last hidden layer to a constant; once
-    # saturated, Q stops depending on the input (a pixel Oracle seed never learned: docs/policy.md).
-    critic_output_scale: str = "paper"
-
-    # Offsets t'-t of the future frames fetched from a dataset in lerobot-train (all >= 2). One valid
-    # offset is picked uniformly per sample; docs/policy.md compares this with uniform t' in {t+2..T}.
+    # lerobot-train fetches o_{t+k} for each of these offsets k (all >= 2) as candidate future goals.
     future_offsets: list[int] = field(default_factory=lambda: [2, 4, 8, 16])
-
-    # Networks (paper appendix): 3 hidden layers of 256, tanh; conv weights shared by observation and goal.
-    hidden_dims: list[int] = field(default_factory=lambda: [256, 256, 256])
-    # Image encoder (docs/policy.md describes both; docs/results/policy_updates.json times them):
-    # "drq": one encoder shared by actor and critic and trained by the critic loss only (the actor sees
-    #   detached features), ReLU convs, a linear projection with LayerNorm + tanh, random-shift augmentation;
-    #   the design of DrQ-v2 and of LeRobot's SAC (gaussian_actor) encoder.
-    # "paper": the paper's, as in the authors' HER code: actor and critic (and each target) own a CNN of
-    #   2x2 stride-2 convs with tanh, flattened (or a spatial softmax), no projection, no augmentation.
-    image_encoder: str = "drq"
-    # Conv layers (one stride per layer), the projection width ("drq": DrQ-v2's feature_dim) and the
-    # random-shift augmentation (DrQ: images the networks see in training are padded by augment_pad pixels,
-    # edge replicated, and randomly cropped back, each frame independently; 0 = off; the indicator reward and
-    # relabeling always compare the raw frames). None = the image encoder's preset (ENCODER_PRESETS).
-    conv_channels: list[int] | None = None
-    conv_kernel_size: int | None = None
-    conv_strides: list[int] | None = None
-    feature_dim: int = 50
-    augment_pad: int | None = None
-    # Precision of the conv layers: "float32", "bfloat16" (autocast; the rest of the networks stays float32)
-    # or "auto" = bfloat16 where the device computes it natively (CUDA with bf16; CPUs with AVX512-BF16 or
-    # AMX), float32 elsewhere, where bf16 would be emulated and slower (docs/results/policy_updates.json).
-    conv_precision: str = "auto"
-    # "drq" only: weight of a self-supervised inverse-dynamics loss on the shared encoder, ||g(enc(o_t),
-    # enc(o_{t+1})) - a_t||^2, which needs no ground truth (the actions are the agent's own) and makes the
-    # features locate what the actions move; 0 = off (the critic loss alone trains the encoder).
-    inverse_dynamics: float = 0.0
-    # "drq" only: the target critic keeps its own EMA copy of the encoder (as in SAC-AE / CURL) instead of
-    # using the online encoder's features of o_{t+1} and the goal (DrQ-v2).
-    target_encoder: bool = False
-    # RopePush: spatial softmax with 32 keypoints before the fully connected layers.
-    spatial_softmax: bool = False
-    spatial_softmax_keypoints: int = 32
-    # Learned-reward baselines ("ae", "vae"): 3x3 convs each followed by 2x2 max-pooling, then a linear map to
-    # the latent code; the decoder mirrors them with 4 up-sampling + conv layers. vae_beta weights the KL term.
-    reward_conv_channels: list[int] = field(default_factory=lambda: [16, 32, 64, 64])
-    reward_latent_dim: int = 32
-    vae_beta: float = 5.0
-    # A learned reward counts as "positive" for the logged false-positive/negative rates when it is >= this;
-    # None = 0.9 for "ae" (cosine of the codes) and -1.0 for "vae" (latent distance within 1 prior std).
-    learned_reward_positive: float | None = None
-    # Inputs normalised with the observation key's mean/std (observation and goal alike) are clipped.
+    # Inputs normalised with their key's mean/std (observation and goal alike) are clipped to +-this.
     input_clip: float = 5.0
-
-    # DDPG.
-    # n-step TD target (DrQ-v2 uses 3): sum_{i=1..n} gamma^(i-1) r_{t+i} + gamma^n Q'(o_{t+n}, g), with every
-    # r_{t+i} the same reward (indicator: o_{t+i} equals the goal) and n cut at the episode end. 1 = the paper's
-    # one-step target. From images a goal k steps ahead is worth its value only after k-1 bootstraps through
-    # learnt features; n > 1 carries the one exact match back n steps per update. Online trainer only: a
-    # lerobot-train sample holds o_t, o_{t+1} and the future frames, not the frames in between.
-    n_step: int = 1
-    tau: float = 0.98  # target <- tau * target + (1 - tau) * online
-    action_l2: float = 1.0  # baselines' HER penalty on the squared actor output
-    learning_rate: float = 1e-3
-    # torch.compile the loss (relabel -> reward -> filter -> DDPG losses) into one graph: fuses the
-    # elementwise work around the matmuls (docs/policy.md has the measured gain); the first update pays the
-    # compilation (tens of seconds on CPU, needs a C++ compiler). Same names as LeRobot's pi0 config.
-    compile_model: bool = False
-    compile_mode: str = "default"
-    # torch intra-op threads while this policy trains or acts on CPU (both trainers and lerobot-eval build it),
-    # None = torch's default (one per core). 1 is the default because the second core is usually busy: with
-    # lerobot-train's loader workers or other jobs, OpenMP threads spinning against them made updates ~3x slower.
-    # A lone online run on an idle 2-core machine updates faster with 2 (1.3x state, 1.7x RGB-D at 64 px):
-    # docs/results/policy_updates.json has both.
-    cpu_threads: int | None = 1
-    # Keep freed memory in the process for reuse (glibc; policy/cpu_memory.py) instead of page-faulting every
-    # large tensor in afresh: 1.45x faster RGB-D updates with 3-step targets on this project's VMs.
-    keep_freed_memory: bool = True
-    # Threads per video decoder that LeRobot's pyav reader opens in this process and in forked loader workers
-    # (data/video_decoder_threads.py): 1 = single-threaded, None = FFmpeg's choice (one per core + 1). Small
-    # frames give decoder threads nothing to share, and on 2 busy cores every hand-off waits: lerobot-train
-    # with 3 fork workers loads faster with 1 (docs/results/README.md, "Loading RGB-D datasets"). Spawned
-    # workers (lerobot-train's default start method) start from FFmpeg's choice.
-    video_decoder_threads: int | None = 1
-    # Exploration (used by the online trainer only, never by select_action).
-    noise_eps: float = 0.2
-    random_eps: float = 0.3
-
-    # lerobot-train's sampler never picks the last frame of an episode: it has no o_{t+1}.
+    # lerobot-train's sampler skips each episode's last frame, which has no o_{t+1}.
     drop_n_last_frames: int = 1
 
-    # Observations are normalised inside the networks (identically for observation and goal) so that the
-    # indicator comparison and relabeling see raw values; actions are in the env's [-1, 1] action space.
+    # Reward
+    # "indicator" (the paper's), "oracle" (ground-truth distance <= oracle_epsilon), or learned "ae" / "vae".
+    reward: str = "indicator"
+    # Success distance of the oracle reward and of the logged ground-truth statistics.
+    oracle_epsilon: float = 0.1
+    # R+, the reward when o_{t+1} equals the goal.
+    positive_reward: float = 1.0
+    # R-, the reward otherwise.
+    negative_reward: float = -1.0
+
+    # Relabeling (Algorithm 1)
+    # Balanced relabeling: goal o_{t+1} with p_next, a future frame t' >= t+2 with p_future, else the recorded.
+    balance: bool = True
+    # balance=true: probability that the goal is o_{t+1}.
+    p_next: float = 0.45
+    # balance=true: probability that the goal is a future frame o_{t'}, t' >= t+2.
+    p_future: float = 0.45
+    # balance=false (the paper's "Indicator"): probability of a future goal over {t+1..T}.
+    p_future_unbalanced: float = 0.9
+    # Balanced future goal when no t' >= t+2 exists: "next" (o_{t+1}) or "recorded" (the recorded goal).
+    balance_fallback: str = "next"
+
+    # Reward filtering (section 5.3)
+    # Drop R- transitions whose Q(o_t, o_g, a_t) exceeds q0.
+    filter: bool = True
+    # The filter's Q: "online" (the critic being trained, the paper's) or "target" (the target critic).
+    filter_q: str = "online"
+    # "always" (the paper's) or "calibrated": only in batches whose R+ have Q > q0 often enough.
+    filter_start: str = "always"
+    # filter_start=calibrated: the share of a batch's R+ transitions that must have Q above q0.
+    filter_calibration: float = 0.9
+
+    # Critic output
+    # Initial Q (the critic's output bias); None = R-/(1-gamma), the lowest return.
+    q_init: float | None = None
+    # "paper" (the MLP outputs Q) or "return" (it outputs (1-gamma) Q, scaled by 1/(1-gamma)).
+    critic_output_scale: str = "paper"
+
+    # Networks (paper appendix)
+    # Hidden layers of the actor's and critic's MLPs (tanh).
+    hidden_dims: list[int] = field(default_factory=lambda: [256, 256, 256])
+    # "drq" (one shared, augmented encoder, DrQ-v2's design) or "paper" (the appendix's CNN per network).
+    image_encoder: str = "drq"
+    # Filters per conv layer; None = the image encoder's preset (ENCODER_PRESETS).
+    conv_channels: list[int] | None = None
+    # Conv kernel size; None = the preset.
+    conv_kernel_size: int | None = None
+    # One stride per conv layer; None = the preset.
+    conv_strides: list[int] | None = None
+    # "drq": width of the linear projection after the convs (DrQ-v2's feature_dim).
+    feature_dim: int = 50
+    # Random-shift augmentation of training frames, in pixels (0 = off); None = the preset.
+    augment_pad: int | None = None
+    # Conv precision: "float32", "bfloat16", or "auto" (bfloat16 where the device computes it natively).
+    conv_precision: str = "auto"
+    # "drq": weight of the self-supervised inverse-dynamics loss on the shared encoder (0 = off).
+    inverse_dynamics: float = 0.0
+    # "drq": the target critic keeps its own EMA copy of the encoder (SAC-AE / CURL) instead of sharing it.
+    target_encoder: bool = False
+    # A spatial softmax (LeRobot's SpatialSoftmax) after the convs (RopePush).
+    spatial_softmax: bool = False
+    # Keypoints of the spatial softmax.
+    spatial_softmax_keypoints: int = 32
+
+    # Learned-reward baselines ("ae", "vae")
+    # Filters of the reward model's 3x3 conv + 2x2 max-pool layers (the decoder mirrors them).
+    reward_conv_channels: list[int] = field(default_factory=lambda: [16, 32, 64, 64])
+    # Size of the latent code.
+    reward_latent_dim: int = 32
+    # Weight of the VAE's KL term.
+    vae_beta: float = 5.0
+    # A learned reward >= this counts as positive in the logged rates; None = 0.9 ("ae") or -1.0 ("vae").
+    learned_reward_positive: float | None = None
+
+    # DDPG
+    # n-step TD target (1 = the paper's one-step target); online trainer only.
+    n_step: int = 1
+    # Target networks: target <- tau * target + (1 - tau) * online.
+    tau: float = 0.98
+    # Weight of the penalty on the squared actor output (baselines' HER).
+    action_l2: float = 1.0
+    # Adam's learning rate (fused_adam, no gradient clipping).
+    learning_rate: float = 1e-3
+    # torch.compile the loss (relabel -> reward -> filter -> DDPG losses) into one graph.
+    compile_model: bool = False
+    # torch.compile's mode (as LeRobot's pi0 config).
+    compile_mode: str = "default"
+
+    # Exploration (online trainer only, never select_action)
+    # Std of the Gaussian noise added to the actor's action.
+    noise_eps: float = 0.2
+    # Probability of a uniform random action instead.
+    random_eps: float = 0.3
+
+    # Observations are normalised inside the networks (observation and goal alike), so the processors are
+    # identity: the indicator comparison and relabeling see raw values; actions are the env's [-1, 1].
     normalization_mapping: dict[str, NormalizationMode] = field(
         default_factory=lambda: {
             "VISUAL": NormalizationMode.IDENTITY,
@@ -207,6 +196,11 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             "ACTION": NormalizationMode.IDENTITY,
         }
     )
+
+    # IGNORED_KEYS: accepted when a checkpoint holds them, never used, never saved, not command-line flags.
+    cpu_threads: Any = field(default=None, init=False, repr=False, compare=False)
+    keep_freed_memory: Any = field(default=None, init=False, repr=False, compare=False)
+    video_decoder_threads: Any = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -231,75 +225,49 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             goal_key(key)  # raises on keys outside observation.*
         if self.horizon is not None:
             self.set_horizon(self.horizon)
-        if self.reward not in REWARD_MODES:
-            raise ValueError(f"reward must be one of {REWARD_MODES}, got {self.reward!r}")
-        if self.reward in LEARNED_REWARDS and self.filter:
-            raise ValueError(
-                f"filter=True drops R- transitions, but reward={self.reward!r} gives a continuous reward with no "
-                "R-: pass --policy.filter=false"
-            )
-        if self.filter_q not in FILTER_Q_SOURCES:
-            raise ValueError(f"filter_q must be one of {FILTER_Q_SOURCES}, got {self.filter_q!r}")
-        if self.filter_start not in FILTER_STARTS:
-            raise ValueError(f"filter_start must be one of {FILTER_STARTS}, got {self.filter_start!r}")
-        if self.critic_output_scale not in CRITIC_OUTPUT_SCALES:
-            raise ValueError(
-                f"critic_output_scale must be one of {CRITIC_OUTPUT_SCALES}, got {self.critic_output_scale!r}"
-            )
-        if self.video_decoder_threads is not None and self.video_decoder_threads < 1:
-            raise ValueError(
-                f"video_decoder_threads must be None (FFmpeg's choice) or >= 1, got {self.video_decoder_threads}"
-            )
-        if not 0 < self.filter_calibration <= 1:
-            raise ValueError(f"filter_calibration must be in (0, 1], got {self.filter_calibration}")
-        if not self.reward_conv_channels or self.reward_latent_dim < 1:
-            raise ValueError(
-                f"reward_conv_channels must list at least one conv layer, got {self.reward_conv_channels}; "
-                f"reward_latent_dim must be >= 1, got {self.reward_latent_dim}"
-            )
+        for name, choices in CHOICES.items():
+            if getattr(self, name) not in choices:
+                raise ValueError(f"{name} must be one of {choices}, got {getattr(self, name)!r}")
+        for name, value in ENCODER_PRESETS[self.image_encoder].items():
+            if getattr(self, name) is None:
+                setattr(self, name, value)
+        offsets = self.future_offsets
+        for name, ok, requirement in (
+            ("future_offsets", bool(offsets) and min(offsets) >= 2, "non-empty and all >= 2 (t' >= t+2)"),
+            ("p_future_unbalanced", 0 <= self.p_future_unbalanced <= 1, "in [0, 1]"),
+            ("filter_calibration", 0 < self.filter_calibration <= 1, "in (0, 1]"),
+            ("hidden_dims", len(self.hidden_dims) > 0, "non-empty"),
+            ("conv_channels", len(self.conv_channels) > 0, "non-empty"),
+            ("augment_pad", self.augment_pad >= 0, ">= 0 pixels"),
+            ("inverse_dynamics", self.inverse_dynamics >= 0, ">= 0 (0 = off)"),
+            ("reward_conv_channels", len(self.reward_conv_channels) > 0, "non-empty"),
+            ("reward_latent_dim", self.reward_latent_dim >= 1, ">= 1"),
+            ("n_step", self.n_step >= 1, ">= 1 (1 = the paper's one-step TD target)"),
+            ("tau", 0 <= self.tau <= 1, "in [0, 1]"),
+        ):
+            if not ok:
+                raise ValueError(f"{name} must be {requirement}, got {getattr(self, name)}")
         if not self.positive_reward > self.negative_reward:
             raise ValueError("positive_reward must be larger than negative_reward")
         if min(self.p_next, self.p_future) < 0 or self.p_next + self.p_future > 1:
             raise ValueError(
                 f"p_next={self.p_next}, p_future={self.p_future} are not probabilities summing <= 1"
             )
-        if self.balance_fallback not in BALANCE_FALLBACKS:
+        if self.reward in LEARNED_REWARDS and self.filter:
             raise ValueError(
-                f"balance_fallback must be one of {BALANCE_FALLBACKS}, got {self.balance_fallback!r}"
+                f"filter=True drops R- transitions, but reward={self.reward!r} gives a continuous reward with no "
+                "R-: pass --policy.filter=false"
             )
-        if not 0 <= self.p_future_unbalanced <= 1:
-            raise ValueError(f"p_future_unbalanced must be in [0, 1], got {self.p_future_unbalanced}")
-        if not self.future_offsets or min(self.future_offsets) < 2:
-            raise ValueError(
-                f"future_offsets must be non-empty and all >= 2 (t' >= t+2), got {self.future_offsets}"
-            )
-        if self.n_step < 1:
-            raise ValueError(f"n_step must be >= 1 (1 = the paper's one-step TD target), got {self.n_step}")
-        if not 0 <= self.tau <= 1:
-            raise ValueError(f"tau must be in [0, 1], got {self.tau}")
-        if self.image_encoder not in IMAGE_ENCODERS:
-            raise ValueError(f"image_encoder must be one of {IMAGE_ENCODERS}, got {self.image_encoder!r}")
-        if self.inverse_dynamics < 0:
-            raise ValueError(f"inverse_dynamics must be >= 0 (0 = off), got {self.inverse_dynamics}")
         if self.inverse_dynamics > 0 and self.image_encoder != "drq":
             raise ValueError(
                 f"inverse_dynamics={self.inverse_dynamics} trains the shared image encoder, which "
                 f"image_encoder={self.image_encoder!r} does not have: use image_encoder=drq or inverse_dynamics=0"
             )
-        for name, value in ENCODER_PRESETS[self.image_encoder].items():
-            if getattr(self, name) is None:
-                setattr(self, name, value)
-        if len(self.conv_channels) == 0 or len(self.hidden_dims) == 0:
-            raise ValueError("conv_channels and hidden_dims must not be empty")
         if len(self.conv_strides) != len(self.conv_channels):
             raise ValueError(
                 f"conv_strides has {len(self.conv_strides)} entries but conv_channels has "
                 f"{len(self.conv_channels)}: give one stride per conv layer"
             )
-        if self.conv_precision not in CONV_PRECISIONS:
-            raise ValueError(f"conv_precision must be one of {CONV_PRECISIONS}, got {self.conv_precision!r}")
-        if self.augment_pad < 0:
-            raise ValueError(f"augment_pad must be >= 0 pixels, got {self.augment_pad}")
 
     def set_horizon(self, horizon: int, source: str | None = None) -> None:
         """Set T from the data (``source`` names where it comes from); a different given value is an error."""
@@ -487,6 +455,18 @@ class IndicatorDDPGConfig(PreTrainedConfig):
 
     def get_scheduler_preset(self) -> None:
         return None
+
+
+def _encode(config: IndicatorDDPGConfig, declared_type: type | None = None) -> dict:
+    """draccus's encoding (config.json, train_config.json) without the IGNORED_KEYS."""
+    if declared_type is not None and is_choice_type(declared_type):
+        encoded = encode_choice(config, declared_type)  # with the "type" key
+    else:
+        encoded = encode_dataclass(config, declared_type)
+    return {k: v for k, v in encoded.items() if k not in IGNORED_KEYS}
+
+
+draccus.encode.register(IndicatorDDPGConfig, _encode)
 
 
 def default_observation_keys(features: dict[str, PolicyFeature], kind: FeatureType | None) -> list[str]:

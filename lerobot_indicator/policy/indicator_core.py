@@ -33,7 +33,14 @@ from torch import Tensor, nn
 
 from lerobot_indicator.keys import OBS_GT_ACHIEVED_GOAL, OBS_GT_DESIRED_GOAL, goal_key
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
-from lerobot_indicator.policy.networks_indicator_ddpg import Critic, draw_shifts, encode_frames, widest_word
+from lerobot_indicator.policy.encode_once import encode_distinct_frames
+from lerobot_indicator.policy.networks_indicator_ddpg import (
+    Critic,
+    Features,
+    draw_shifts,
+    encode_frames,
+    widest_word,
+)
 
 # Transition-batch keys (the table above).
 ACTION = "action"
@@ -175,18 +182,6 @@ def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     return (x * mask).sum() / mask.sum().clamp_min(1)
 
 
-@dataclass
-class Features:
-    """``[enc(o), enc(o_g)]`` as each network sees it in one update."""
-
-    critic: Tensor  # (o_t, g) for Q(o_t, g, a_t), with gradients into the critic's encoder
-    actor: Tensor  # (o_t, g) for pi(o_t, g): the critic's, detached, when the encoder is shared
-    target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
-    target_actor: Tensor
-    transition: Tensor | None = None  # (o_t, o_{t+1}) with gradients, shared encoder only
-    target_critic_obs: Tensor | None = None  # (o_t, g) as the target critic sees it (filter_q="target")
-
-
 def encode_batch(
     obs: dict[str, Tensor],
     next_obs: dict[str, Tensor],
@@ -198,88 +193,68 @@ def encode_batch(
     target_critic: nn.Module,
     config: IndicatorDDPGConfig,
     transition_next: dict[str, Tensor] | None = None,
+    encode_once: bool = True,
 ) -> Features:
-    """Every network's features, each distinct frame encoded once per encoder.
+    """Every network's features for one update: ``encode_plain``'s, or with ``encode_once`` the same values
+    with each distinct frame encoded once per encoder (``encode_once.encode_distinct_frames``).
 
-    ``next_obs`` is the frame the TD target bootstraps from (o_{t+1}; o_{t+n} for n-step targets). A goal that
-    *is* that frame (``goal_is_next``: about half the batch with balancing and one-step targets) reuses its
-    encoding. With the shared ("drq") encoder one conv pass over o_t, o_{t+1} and the other goals serves all
-    four networks: the targets use the online encoder's features of (o_{t+1}, g) without gradients (DrQ-v2),
-    or their own EMA encoder (``target_encoder``). Under ``torch.compile`` (static shapes) and for state
-    inputs every goal is encoded, which gives the same values. ``transition_next``: o_{t+1} for the
-    inverse-dynamics features (o_t, o_{t+1}) where ``next_obs`` is another frame, encoded in the same pass.
+    ``next_obs`` is the frame the TD target bootstraps from (o_{t+1}; o_{t+n} for n-step targets) and
+    ``goal_is_next`` marks the goals that are that frame, bit for bit (the encode-once path reuses its
+    encoding). ``transition_next``: o_{t+1} for the inverse-dynamics features where ``next_obs`` is another
+    frame.
     """
-    dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
-    everyone = torch.arange(goal_is_next.shape[0], device=goal_is_next.device)
-    rest = (~goal_is_next).nonzero().squeeze(1) if dedupe else everyone
-    # index_select: a row copy, several times faster than advanced indexing on CPU.
-    goal_rest = {k: v.index_select(0, rest) for k, v in goal.items()} if dedupe else goal
     # One random shift per transition, shared by its o_t, o_{t+1} and goal: the critic compares where things
     # are in two images, so shifting them independently (as DrQ does for single observations) would blur the
     # few-pixel displacement an action makes into the shift noise.
-    shift = draw_shifts(everyone.shape[0], config.augment_pad, everyone.device) if config.image_keys else None
-
-    def shifts(*rows: Tensor) -> list[Tensor] | None:
-        return None if shift is None else [shift[:, r] for r in rows]
-
-    def encode_with_next(
-        encoder: nn.Module, frames: list[dict[str, Tensor]], next_needs_grad: bool = True
-    ) -> list[Tensor]:
-        """Encodings of ``frames`` (the batch's o_t) + [o_{t+1}, g], the goal's sharing o_{t+1}'s where they
-        are one frame. Without ``next_needs_grad`` (o_{t+1} feeds only the targets, except where it is the
-        goal) the o_{t+1} frames that are not goals are encoded in a second pass without gradients: the
-        backward pass then covers 2B frames instead of 2B + #(goals != o_{t+1})."""
-        if not (dedupe and torch.is_grad_enabled()) or next_needs_grad or rest.numel() == 0:
-            rows = shifts(*[everyone] * (len(frames) + 1), rest)
-            *h, h_next, h_rest = encode_frames(encoder, [*frames, next_obs, goal_rest], rows)
-            return [*h, h_next, h_next.index_put((rest,), h_rest) if dedupe else h_rest]
-        is_goal = goal_is_next.nonzero().squeeze(1)
-        next_goal = {k: v.index_select(0, is_goal) for k, v in next_obs.items()}
-        rows = shifts(*[everyone] * len(frames), is_goal, rest)
-        *h, h_next_goal, h_rest = encode_frames(encoder, [*frames, next_goal, goal_rest], rows)
-        with torch.no_grad():
-            next_rest = {k: v.index_select(0, rest) for k, v in next_obs.items()}
-            (h_next_rest,) = encode_frames(encoder, [next_rest], shifts(rest))
-        h_goal = h_rest.new_empty(everyone.shape[0], h_rest.shape[1]).index_put((is_goal,), h_next_goal)
-        h_next = h_goal.index_put((rest,), h_next_rest)
-        return [*h, h_next, h_goal.index_put((rest,), h_rest)]
-
-    target_obs = config.filter and config.filter_q == "target"
-
-    def target_critic_features() -> tuple[Tensor, Tensor | None]:
-        """The target critic's (o_{t+1}, g) and, for the filter, (o_t, g), from its own encoder."""
-        with torch.no_grad():
-            *h_obs, h_next, h_goal = encode_with_next(target_critic.encoder, [obs] if target_obs else [])
-        return torch.cat([h_next, h_goal], dim=1), torch.cat([h_obs[0], h_goal], 1) if target_obs else None
-
-    if config.shared_encoder:
-        extra = [] if transition_next is None else [transition_next]
-        # o_{t+1} trains the encoder only through the inverse-dynamics loss of a one-step target.
-        next_needs_grad = critic.inverse is not None and transition_next is None
-        h_obs, *h_extra, h_next, h_goal = encode_with_next(critic.encoder, [obs, *extra], next_needs_grad)
-        features = torch.cat([h_obs, h_goal], dim=1)
-        target = torch.cat([h_next, h_goal], dim=1).detach()
-        target_o = features.detach() if target_obs else None
-        if config.target_encoder:
-            target, target_o = target_critic_features()
-        return Features(
-            critic=features,
-            actor=features.detach(),
-            target_critic=target,
-            target_actor=target,
-            transition=torch.cat([h_obs, h_extra[0] if h_extra else h_next], dim=1),
-            target_critic_obs=target_o,
+    batch_size, device = goal_is_next.shape[0], goal_is_next.device
+    shift = draw_shifts(batch_size, config.augment_pad, device) if config.image_keys else None
+    nets = (actor, critic, target_actor, target_critic)
+    if encode_once:
+        return encode_distinct_frames(
+            obs, next_obs, goal, goal_is_next, *nets, config, shift, transition_next
         )
-    target_c, target_o = target_critic_features()
+    return encode_plain(obs, next_obs, goal, *nets, config, shift, transition_next)
+
+
+def encode_plain(
+    obs: dict[str, Tensor],
+    next_obs: dict[str, Tensor],
+    goal: dict[str, Tensor],
+    actor: nn.Module,
+    critic: Critic,
+    target_actor: nn.Module,
+    target_critic: nn.Module,
+    config: IndicatorDDPGConfig,
+    shift: Tensor | None = None,
+    transition_next: dict[str, Tensor] | None = None,
+) -> Features:
+    """Every network's features as DrQ-v2's update computes them: the shifted o_t and goal encoded with
+    gradients, the bootstrap frame ``next_obs`` without (only the TD target reads it).
+
+    "paper" encoders: each network encodes its own inputs. Shared ("drq") encoder: the critic's encoder
+    serves the actor, which sees its features detached (only the critic loss trains it), and the targets,
+    unless they have their own EMA encoder (``target_encoder``); the inverse-dynamics features pair o_t with
+    o_{t+1} (``transition_next``, else ``next_obs``), encoded with gradients.
+    """
+    target_obs = config.filter and config.filter_q == "target"  # the filter reads the target critic's Q
+    if not config.shared_encoder:
+        with torch.no_grad():
+            targets = [net.encode(next_obs, goal, shift) for net in (target_critic, target_actor)]
+            target_o = target_critic.encode(obs, goal, shift) if target_obs else None
+        critic_f, actor_f = critic.encode(obs, goal, shift), actor.encode(obs, goal, shift)
+        return Features(critic_f, actor_f, *targets, target_critic_obs=target_o)
+
+    h_obs, h_goal = encode_frames(critic.encoder, [obs, goal], None if shift is None else [shift, shift])
+    features = torch.cat([h_obs, h_goal], dim=1)
+    target_net = target_critic if config.target_encoder else critic
     with torch.no_grad():
-        target_a = torch.cat(encode_with_next(target_actor.encoder, []), dim=1)
-    return Features(
-        critic=critic.encode(obs, goal, shift),
-        actor=actor.encode(obs, goal, shift),
-        target_critic=target_c,
-        target_actor=target_a,
-        target_critic_obs=target_o,
-    )
+        target = target_net.encode(next_obs, goal, shift)
+        target_o = target_net.encode(obs, goal, shift) if target_obs else None
+    transition = None
+    if critic.inverse is not None:
+        h_next = critic.encoder(next_obs if transition_next is None else transition_next, shift)
+        transition = torch.cat([h_obs, h_next], dim=1)
+    return Features(features, features.detach(), target, target, transition, target_o)
 
 
 def soft_update(target: nn.Module, online: nn.Module, tau: float) -> None:
@@ -327,6 +302,7 @@ def indicator_ddpg_loss(
     config: IndicatorDDPGConfig,
     generator: torch.Generator | None = None,
     reward_model: nn.Module | None = None,
+    encode_once: bool = True,
 ) -> tuple[Tensor, dict[str, Tensor]]:
     """One DDPG step's loss on a transition batch (module docstring), with relabeling, rewards and filtering.
 
@@ -337,7 +313,8 @@ def indicator_ddpg_loss(
     filter's Q are computed without gradients) and the actor only from -Q(o, g, pi(o, g)) + action_l2 *
     pi^2 (evaluated through the critic's head with detached weights, on the same detached encoding of
     (o, g) as Q(o, g, a)), so one backward and one optimizer step over both
-    parameter sets equals separate actor and critic updates.
+    parameter sets equals separate actor and critic updates. ``encode_once``: ``encode_batch``'s path (the
+    default encodes each distinct frame once; False: the plain DrQ-v2 encoding, the same values).
 
     Logging stats are 0-d tensors (``stats_to_floats`` reads them): no host sync inside, so
     ``torch.compile`` captures the whole function as one graph.
@@ -376,7 +353,7 @@ def indicator_ddpg_loss(
     returns, discount, bootstrap_obs = reward, torch.full_like(reward, config.gamma), next_obs
     if config.n_step > 1:
         returns, discount, bootstrap_obs = n_step_return(batch, keys, reward, step_reward, config)
-    # Where the goal is the frame the target bootstraps from, its encoding is shared (encode_batch).
+    # Where the goal is the frame the target bootstraps from, encode_once shares its encoding.
     goal_is_next = relabel.source == SOURCE_NEXT
     if config.n_step > 1:
         goal_is_next = goal_is_next & ~batch[PATH_VALID].any(dim=1)
@@ -393,6 +370,7 @@ def indicator_ddpg_loss(
         target_critic,
         config,
         transition_next,
+        encode_once,
     )
     q = critic.head(f.critic, action)
     with torch.no_grad():

@@ -7,18 +7,15 @@ after each optimizer step) moves the target networks.
 """
 
 import copy
-import logging
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
 from torch import Tensor, nn
 
-from lerobot_indicator.data.video_decoder_threads import set_video_decoder_threads
 from lerobot_indicator.finite import check_batch, check_loss
 from lerobot_indicator.keys import goal_key
 from lerobot_indicator.policy import indicator_core
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
-from lerobot_indicator.policy.cpu_memory import keep_freed_memory
 from lerobot_indicator.policy.learned_reward import LearnedReward
 from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
 
@@ -34,16 +31,6 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         dataset_meta=None,
     ):
         super().__init__(config)
-        if config.cpu_threads and torch.device(config.device or "cpu").type == "cpu":
-            torch.set_num_threads(config.cpu_threads)
-        if config.keep_freed_memory:
-            keep_freed_memory()
-        if not set_video_decoder_threads(config.video_decoder_threads) and config.video_decoder_threads:
-            logging.warning(
-                "video_decoder_threads=%d not applied: pyav's libavutil was not found in this process; video "
-                "decoders keep FFmpeg's thread choice",
-                config.video_decoder_threads,
-            )
         config.validate_features()
         if dataset_meta is not None and getattr(dataset_meta, "episodes", None) is not None:
             config.set_horizon(dataset_horizon(dataset_meta), source=f"dataset {dataset_meta.repo_id}")

@@ -7,6 +7,7 @@ makes hindsight relabeling a plain swap of tensors.
 """
 
 import functools
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -190,7 +191,7 @@ class ObservationEncoder(nn.Module):
                     weight, bias = self._folded_first_conv([parts[0][k].dtype for k in self.image_keys])
                 else:
                     weight, bias = conv.weight, conv.bias
-                x = conv_relu(x, weight.to(x.dtype), bias.to(x.dtype), conv.stride[0])
+                x = F.relu(F.conv2d(x, weight.to(x.dtype), bias.to(x.dtype), conv.stride))
             return x
         with torch.autocast(device, torch.bfloat16, enabled=bf16):
             return self.conv(images)
@@ -209,51 +210,6 @@ class ObservationEncoder(nn.Module):
         scale, offset = torch.cat(scales).view(1, -1, 1, 1), torch.cat(offsets).view(1, -1, 1, 1)
         first: nn.Conv2d = self.conv[0]
         return first.weight * scale, first.bias - (first.weight * offset).sum(dim=(1, 2, 3))
-
-
-def conv_relu(x: Tensor, weight: Tensor, bias: Tensor, stride: int) -> Tensor:
-    """``relu(conv2d(x, weight, bias, stride))`` without padding. On CPU one oneDNN convolution with the ReLU
-    fused into it: its forward writes the maps once instead of writing and re-reading them, and its backward
-    masks the gradient with the saved output in the conv's own layout. Elsewhere, and under ``torch.compile``
-    (which fuses by itself), the plain ops."""
-    if x.device.type != "cpu" or torch.compiler.is_compiling() or not _fused_conv_relu_available():
-        return F.relu(F.conv2d(x, weight, bias, stride))
-    return _FusedConvReLU.apply(x, weight, bias, stride)
-
-
-@functools.cache
-def _fused_conv_relu_available() -> bool:
-    return torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_convolution_pointwise")
-
-
-class _FusedConvReLU(torch.autograd.Function):
-    @staticmethod
-    def forward(ctx, x: Tensor, weight: Tensor, bias: Tensor, stride: int) -> Tensor:  # type: ignore[override]
-        out = torch.ops.mkldnn._convolution_pointwise(
-            x, weight, bias, [0, 0], [stride, stride], [1, 1], 1, "relu", [], ""
-        )
-        ctx.save_for_backward(x, weight, out)
-        ctx.stride = stride
-        return out
-
-    @staticmethod
-    def backward(ctx, grad: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None, None]:  # type: ignore[override]
-        x, weight, out = ctx.saved_tensors
-        grad = torch.ops.aten.threshold_backward(grad.contiguous(memory_format=torch.channels_last), out, 0)
-        grad_x, grad_w, grad_b = torch.ops.aten.convolution_backward(
-            grad,
-            x,
-            weight,
-            [weight.shape[0]],
-            [ctx.stride] * 2,
-            [0, 0],
-            [1, 1],
-            False,
-            [0, 0],
-            1,
-            list(ctx.needs_input_grad[:3]),
-        )
-        return grad_x, grad_w, grad_b, None
 
 
 def as_float(x: Tensor) -> Tensor:
@@ -369,6 +325,18 @@ class ChannelsLastFlatten(nn.Module):
 
     def forward(self, x: Tensor) -> Tensor:
         return x.permute(0, 2, 3, 1).flatten(1)
+
+
+@dataclass
+class Features:
+    """``[enc(o), enc(o_g)]`` as each network sees it in one update (``indicator_core.encode_batch``)."""
+
+    critic: Tensor  # (o_t, g) for Q(o_t, g, a_t), with gradients into the critic's encoder
+    actor: Tensor  # (o_t, g) for pi(o_t, g): the critic's, detached, when the encoder is shared
+    target_critic: Tensor  # (o_{t+1}, g) for the TD target, without gradients
+    target_actor: Tensor
+    transition: Tensor | None = None  # (o_t, o_{t+1}) with gradients, shared encoder only
+    target_critic_obs: Tensor | None = None  # (o_t, g) as the target critic sees it (filter_q="target")
 
 
 class GoalConditioned(nn.Module):

@@ -60,9 +60,6 @@ class OnlineRecordConfig:
     repo_id: str | None = None
     root: str | None = None
     push_to_hub: bool = False
-    # Seconds between dataset checkpoints (finalize + journal + reopen; each starts new files). The run's
-    # resume state is saved at these checkpoints only, so the two always agree: a kill replays <= this much.
-    checkpoint_every_s: float = 30.0
 
 
 @dataclass
@@ -86,6 +83,13 @@ class OnlineTrainConfig(HubMixin):
     # LeRobot's Weights & Biases logging (--wandb.enable=true --wandb.project=...; --wandb.mode=offline works
     # without a network): every cycle's metrics, the learning-curve figure and the checkpoints.
     wandb: WandBConfig = field(default_factory=WandBConfig)
+    # Process settings, applied by the CLI (lerobot_indicator/process.py; docs/policy.md, "Process settings").
+    # torch intra-op threads while the policy trains on CPU; None = torch's default (one per core).
+    cpu_threads: int | None = 1
+    # glibc keeps freed memory for reuse instead of page-faulting large tensors in again on every update.
+    keep_freed_memory: bool = True
+    # Threads of each video decoder this process (and its forked workers) opens; None = FFmpeg's choice.
+    video_decoder_threads: int | None = 1
     # Filled by validate() on --resume: the checkpoint to continue from.
     checkpoint_path: Path | None = field(init=False, default=None)
 
@@ -118,10 +122,11 @@ class OnlineTrainConfig(HubMixin):
             raise ValueError(f"--online.num_workers must be >= 1, got {o.num_workers}")
         if o.input_stats not in INPUT_STATS:
             raise ValueError(f"--online.input_stats must be one of {INPUT_STATS}, got {o.input_stats!r}")
-        if self.record.checkpoint_every_s < 0:
-            raise ValueError(
-                f"--record.checkpoint_every_s must be >= 0, got {self.record.checkpoint_every_s}"
-            )
+        for name in ("cpu_threads", "video_decoder_threads"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise ValueError(
+                    f"--{name} must be null (the library's choice) or >= 1, got {getattr(self, name)}"
+                )
         if self.steps < o.updates_per_cycle:
             raise ValueError(f"--steps={self.steps} is less than one cycle (--online.updates_per_cycle)")
         if not self.job_name:

@@ -31,6 +31,7 @@ from lerobot.utils.random_utils import set_seed
 from lerobot.utils.utils import init_logging
 from tqdm import tqdm
 
+from lerobot_indicator import process
 from lerobot_indicator.finite import NonFiniteError, check_module
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
 from lerobot_indicator.stop_signals import exit_code, raise_interrupted
@@ -393,10 +394,18 @@ def train_metrics(rollouts: list[Rollouts]) -> dict[str, float]:
     }
 
 
+def apply_process_settings(cfg: OnlineTrainConfig) -> None:
+    """``--cpu_threads`` (when the policy trains on CPU), ``--keep_freed_memory``, ``--video_decoder_threads``."""
+    on_cpu = torch.device(cfg.policy.device or "cpu").type == "cpu"
+    process.apply(cfg.cpu_threads if on_cpu else None, cfg.keep_freed_memory, cfg.video_decoder_threads)
+
+
 @parser.wrap()
 def train(cfg: OnlineTrainConfig) -> dict[str, float]:
     cfg.validate()
     trainer = OnlineTrainer(cfg)
+    # Once the trainer is built, so the env worker processes it started keep the libraries' defaults.
+    apply_process_settings(cfg)
     try:
         return trainer.train()
     finally:

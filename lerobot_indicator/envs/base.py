@@ -1,10 +1,11 @@
-"""Shared gymnasium base for goal-conditioned MuJoCo tasks with image goals (reach, rope push).
+"""Shared gymnasium base for goal-conditioned MuJoCo tasks with image goals (reach, rope push, and the
+gymnasium goal envs wrapped by :mod:`lerobot_indicator.envs.gym_goal`).
 
 What every task shares lives here: ``reset()`` / ``step()``, the observation dict of docs/conventions.md,
 the ground-truth ``info``, RGB-D camera rendering, rendering the goal observation by putting the simulator
 in the goal configuration and restoring the exact state afterwards, seeding, and ``render()`` for eval
-videos. A task fills the hooks of :class:`MujocoGoalEnv`: the model, the episode's start and goal, the
-goal configuration, the action, and what its state and achieved goal are.
+videos. A task fills the hooks of :class:`MujocoGoalEnv`: the model (or a model and data it already has),
+the episode's start and goal, the goal configuration, the action, and what its state and achieved goal are.
 
 Observation dict (``obs_type``: ``state`` | ``rgb`` | ``rgbd``):
     agent_pos            float32 (D,)      proprio (reach: end-effector xyz)
@@ -24,6 +25,7 @@ import gymnasium as gym
 import numpy as np
 
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.envs.models import RENDER_GROUP
 from lerobot_indicator.keys import GOAL_PREFIX, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, GT_DISTANCE, depth_key
 
 OBS_TYPES = ("state", "rgb", "rgbd")
@@ -64,6 +66,8 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
     state_dim: int = 3
+    # Geom groups the task camera draws (sites are never drawn).
+    render_geom_groups: tuple[int, ...] = (RENDER_GROUP,)
 
     def __init__(
         self,
@@ -105,8 +109,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         from lerobot_indicator.envs.rendering import RGBDRenderer
 
         self._mj = mujoco
-        self.model = self._build_model()
-        self.data = mujoco.MjData(self.model)
+        self.model, self.data = self._build_simulation()
         self.n_substeps = max(1, round(1.0 / (fps * self.model.opt.timestep)))
         self._state_spec = mujoco.mjtState.mjSTATE_INTEGRATION
         self._state_buf = np.empty(mujoco.mj_stateSize(self.model, self._state_spec))
@@ -136,9 +139,20 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         self.observation_space = gym.spaces.Dict(spaces)
 
     # --- what a task provides -------------------------------------------------------------------
-    @abc.abstractmethod
     def _build_model(self):
-        """Compiled MjModel with a fixed camera named ``camera_cfg.name``."""
+        """Compiled MjModel with a fixed camera named ``camera_cfg.name`` (or see :meth:`_camera`)."""
+        raise NotImplementedError(f"{type(self).__name__} must implement _build_model or _build_simulation")
+
+    def _build_simulation(self):
+        """(MjModel, MjData) the task runs on: a fresh ``MjData`` of :meth:`_build_model` by default; a task
+        wrapping a simulator that already exists returns that simulator's model and data."""
+        model = self._build_model()
+        return model, self._mj.MjData(model)
+
+    def _camera(self):
+        """What the task camera looks through: the name of a fixed camera of the model (by default
+        ``camera_cfg.name``) or a :class:`~lerobot_indicator.envs.rendering.FreeCamera`."""
+        return self.camera_cfg.name
 
     @abc.abstractmethod
     def _start_episode(self, options: dict[str, Any]) -> None:
@@ -186,7 +200,10 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         if self._renderer is None:
             s = self.camera_cfg.supersample
             self._renderer = self._renderer_cls(
-                self.model, self.camera_cfg.width * s, self.camera_cfg.height * s
+                self.model,
+                self.camera_cfg.width * s,
+                self.camera_cfg.height * s,
+                geom_groups=self.render_geom_groups,
             )
         return self._renderer
 
@@ -206,11 +223,15 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
 
     def _render_camera(self, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
         """(RGB, depth in metres or None) at the camera's size: rendered ``supersample`` times larger and
-        area-averaged down when asked (depth averaged in metres, before the sensor's range test)."""
+        area-averaged down when asked (depth averaged in metres, before the sensor's range test).
+
+        ``mj_forward`` first: after ``mj_step`` the derived positions MuJoCo draws from are one substep
+        older than the state, so a render without it would not be a function of the state alone."""
         from lerobot_indicator.envs.rendering import area_downsample
 
         s = self.camera_cfg.supersample
-        rgb, depth_m = self.renderer.render(self.data, self.camera_cfg.name, depth=depth)
+        self._mj.mj_forward(self.model, self.data)
+        rgb, depth_m = self.renderer.render(self.data, self._camera(), depth=depth)
         return area_downsample(rgb, s), None if depth_m is None else area_downsample(depth_m, s)
 
     def _camera_obs(self, prefix: str = "") -> dict[str, np.ndarray]:

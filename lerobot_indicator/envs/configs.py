@@ -1,4 +1,5 @@
-"""LeRobot ``EnvConfig`` types for the Sawyer tasks (``--env.type=sawyer_reach``).
+"""LeRobot ``EnvConfig`` types of the goal tasks: ``--env.type=sawyer_reach | rope_push`` (our scenes) and
+``reacher | fetch_reach | fetch_push | fetch_slide`` (gymnasium / gymnasium-robotics envs, wrapped).
 
 Only dataclasses and LeRobot imports here: this module is imported by every LeRobot CLI through plugin
 discovery, so robosuite and MuJoCo are imported when an env is built, not before.
@@ -8,11 +9,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 from lerobot.configs import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.processor import PolicyProcessorPipeline
-from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE, OBS_STR
 
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
@@ -24,8 +26,8 @@ SAWYER_REACH_TASK = "SawyerReach-v0"
 
 
 @dataclass
-class SawyerGoalEnvConfig(EnvConfig):
-    """Shared base of the Sawyer goal tasks: obs type, camera, end-effector control, feature maps."""
+class GoalEnvConfig(EnvConfig):
+    """Shared base of the goal tasks: obs type, camera, horizon, evaluation reward, feature maps."""
 
     task: str | None = None
     fps: int = 20
@@ -35,19 +37,13 @@ class SawyerGoalEnvConfig(EnvConfig):
     # the last step, 0 before: lerobot-eval's avg_sum_reward is then minus the mean final distance).
     eval_reward: str = "success"
     render_mode: str = "rgb_array"
-    # Draw the robot with its primitive collision shapes for the camera: far fewer triangles than robosuite's
-    # meshes for software GL to rasterise (docs/envs.md, docs/results/reach_env_speed.json).
-    light_render: bool = True
     camera: GoalCameraConfig = field(default_factory=GoalCameraConfig)
-    end_effector: EndEffectorConfig = field(default_factory=EndEffectorConfig)
     state_dim: int = 3
     action_dim: int = 3
 
     def __post_init__(self):
         if isinstance(self.camera, dict):  # make_env_config("sawyer_reach", camera={...})
             self.camera = GoalCameraConfig(**self.camera)
-        if isinstance(self.end_effector, dict):
-            self.end_effector = EndEffectorConfig(**self.end_effector)
         if self.obs_type not in OBS_TYPES:
             raise ValueError(f"obs_type: unknown {self.obs_type!r}; expected one of {OBS_TYPES}")
         if self.eval_reward not in EVAL_REWARDS:
@@ -96,9 +92,7 @@ class SawyerGoalEnvConfig(EnvConfig):
             "obs_type": self.obs_type,
             "render_mode": self.render_mode,
             "camera": self.camera,
-            "end_effector": self.end_effector,
             "fps": self.fps,
-            "light_render": self.light_render,
             "max_episode_steps": self.episode_length,
             "episode_length": self.episode_length,
             "eval_reward": self.eval_reward,
@@ -109,6 +103,25 @@ class SawyerGoalEnvConfig(EnvConfig):
 
         steps = [DepthToImagesProcessorStep(depth_keys=self.depth_keys)] if self.depth_keys else []
         return PolicyProcessorPipeline(steps=steps), PolicyProcessorPipeline(steps=[])
+
+
+@dataclass
+class SawyerGoalEnvConfig(GoalEnvConfig):
+    """Shared base of the Sawyer goal tasks: the goal-task fields plus end-effector control."""
+
+    # Draw the robot with its primitive collision shapes for the camera: far fewer triangles than robosuite's
+    # meshes for software GL to rasterise (docs/envs.md, docs/results/reach_env_speed.json).
+    light_render: bool = True
+    end_effector: EndEffectorConfig = field(default_factory=EndEffectorConfig)
+
+    def __post_init__(self):
+        if isinstance(self.end_effector, dict):
+            self.end_effector = EndEffectorConfig(**self.end_effector)
+        super().__post_init__()
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {**super().gym_kwargs, "end_effector": self.end_effector, "light_render": self.light_render}
 
 
 @EnvConfig.register_subclass("sawyer_reach")
@@ -200,10 +213,123 @@ class RopePushEnvConfig(SawyerGoalEnvConfig):
         }
 
 
+REACHER_TASK = "Reacher-v0"
+FETCH_REACH_TASK = "FetchReach-v0"
+FETCH_PUSH_TASK = "FetchPush-v0"
+FETCH_SLIDE_TASK = "FetchSlide-v0"
+
+
+def wrapped_task_camera(preset: str, **overrides) -> GoalCameraConfig:
+    """Default camera of a wrapped gymnasium task (``preset``: reacher | fetch | fetch_slide), with overrides."""
+    from lerobot_indicator.envs import fetch, reacher
+
+    presets = {
+        "reacher": reacher.REACHER_CAMERA,
+        "fetch": fetch.FETCH_CAMERA,
+        "fetch_slide": fetch.FETCH_SLIDE_CAMERA,
+    }
+    return GoalCameraConfig(**{**presets[preset], **overrides})
+
+
+@dataclass
+class GymGoalEnvConfig(GoalEnvConfig):
+    """Shared base of the wrapped gymnasium goal tasks (``lerobot_indicator/envs/gym_goal.py``): the paper's
+    T = 50; success when the ground-truth distance is within ``epsilon`` (m). ``fps`` is the wrapped env's
+    control rate (fixed by it). With ``obs_type`` "state" the env also gives ``observation.environment_state``:
+    the wrapped env's observation without its goal (``env_state_dim`` numbers), never compared."""
+
+    # What a task fixes: (state_dim, action_dim, env_state_dim) and its camera preset (wrapped_task_camera).
+    dims: ClassVar[tuple[int, int, int]] = (3, 3, 10)
+    camera_preset: ClassVar[str] = "fetch"
+    episode_length: int = 50
+    epsilon: float = 0.05
+    env_state_dim: int = 10
+
+    def __post_init__(self):
+        if isinstance(self.camera, dict):  # make_env_config("reacher", camera={...}) keeps the task's pose
+            self.camera = wrapped_task_camera(self.camera_preset, **self.camera)
+        if self.epsilon <= 0:
+            raise ValueError(f"epsilon must be > 0, got {self.epsilon}")
+        if (self.state_dim, self.action_dim, self.env_state_dim) != self.dims:
+            raise ValueError(
+                f"{self.type} has (state_dim, action_dim, env_state_dim) = {self.dims}, got "
+                f"{(self.state_dim, self.action_dim, self.env_state_dim)}"
+            )
+        super().__post_init__()
+        if self.obs_type == "state":
+            self.features["environment_state"] = PolicyFeature(
+                type=FeatureType.ENV, shape=(self.env_state_dim,)
+            )
+            self.features_map["environment_state"] = OBS_ENV_STATE
+
+    @property
+    def gym_kwargs(self) -> dict:
+        return {**super().gym_kwargs, "epsilon": self.epsilon}
+
+
+@EnvConfig.register_subclass("reacher")
+@dataclass
+class ReacherEnvConfig(GymGoalEnvConfig):
+    """The paper's Reacher: gymnasium's Reacher-v5, 100x100 RGB, T = 50, success within 0.01 m (fingertip)."""
+
+    dims: ClassVar[tuple[int, int, int]] = (2, 2, 6)
+    camera_preset: ClassVar[str] = "reacher"
+    task: str | None = REACHER_TASK
+    fps: int = 50
+    obs_type: str = "rgb"
+    epsilon: float = 0.01
+    camera: GoalCameraConfig = field(default_factory=lambda: wrapped_task_camera("reacher"))
+    state_dim: int = 2
+    action_dim: int = 2
+    env_state_dim: int = 6
+
+
+@EnvConfig.register_subclass("fetch_reach")
+@dataclass
+class FetchReachEnvConfig(GymGoalEnvConfig):
+    """The paper's FetchReach: gymnasium-robotics' FetchReach-v4, 100x100 RGB-D, T = 50, success within 0.05 m
+    (grip point)."""
+
+    task: str | None = FETCH_REACH_TASK
+    fps: int = 25
+    obs_type: str = "rgbd"
+    camera: GoalCameraConfig = field(default_factory=lambda: wrapped_task_camera("fetch"))
+
+
+@EnvConfig.register_subclass("fetch_push")
+@dataclass
+class FetchPushEnvConfig(GymGoalEnvConfig):
+    """The paper's FetchPush: gymnasium-robotics' FetchPush-v4, state (block xyz compared), T = 50, success within
+    0.05 m (block)."""
+
+    dims: ClassVar[tuple[int, int, int]] = (3, 4, 25)
+    task: str | None = FETCH_PUSH_TASK
+    fps: int = 25
+    camera: GoalCameraConfig = field(default_factory=lambda: wrapped_task_camera("fetch"))
+    action_dim: int = 4
+    env_state_dim: int = 25
+
+
+@EnvConfig.register_subclass("fetch_slide")
+@dataclass
+class FetchSlideEnvConfig(FetchPushEnvConfig):
+    """gymnasium-robotics' FetchSlide-v4 with FetchPush's adapter (not in the paper)."""
+
+    camera_preset: ClassVar[str] = "fetch_slide"
+    task: str | None = FETCH_SLIDE_TASK
+    camera: GoalCameraConfig = field(default_factory=lambda: wrapped_task_camera("fetch_slide"))
+
+
 __all__ = [
     "EndEffectorConfig",
     "EnvConfigFile",
+    "FetchPushEnvConfig",
+    "FetchReachEnvConfig",
+    "FetchSlideEnvConfig",
     "GoalCameraConfig",
+    "GoalEnvConfig",
+    "GymGoalEnvConfig",
+    "ReacherEnvConfig",
     "RopePushEnvConfig",
     "SawyerGoalEnvConfig",
     "SawyerReachEnvConfig",

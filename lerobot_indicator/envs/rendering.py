@@ -3,13 +3,20 @@
 ``mujoco.Renderer`` needs a second full render for depth and keeps shadows, reflections, skybox and
 multisampling (all expensive in software EGL). Observations are compared bit for bit by the indicator
 reward, and software GL is deterministic, so the same simulator state always renders the same bytes.
+
+A renderer draws the geoms of the geometry groups it is given (our own scenes: ``RENDER_GROUP``) and no
+sites, through a fixed camera of the model (by name) or a :class:`FreeCamera` (for models we did not
+write, which have no suitable camera).
 """
 
 from __future__ import annotations
 
 import atexit
 import contextlib
+import math
 import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,10 +57,41 @@ def _close_open_renderers() -> None:
             renderer.close()
 
 
-class RGBDRenderer:
-    """Offscreen renderer for the fixed cameras of one model (one GL context per env instance)."""
+@dataclass(frozen=True)
+class FreeCamera:
+    """MuJoCo's free camera: looks at ``lookat`` from ``distance`` m, ``azimuth`` / ``elevation`` in degrees
+    (MuJoCo's convention: the view direction is (cos el cos az, cos el sin az, sin el)). Its vertical field of
+    view is the model's ``vis.global_.fovy``."""
 
-    def __init__(self, model, width: int, height: int, max_geom: int = 2000):
+    lookat: tuple[float, float, float]
+    distance: float
+    azimuth: float
+    elevation: float
+
+    @classmethod
+    def looking_from(cls, pos: Sequence[float], lookat: Sequence[float]) -> FreeCamera:
+        """The free camera at ``pos`` looking at ``lookat`` (world frame, metres), image up towards +z."""
+        view = [float(b) - float(a) for a, b in zip(pos, lookat, strict=True)]
+        distance = math.sqrt(sum(v * v for v in view))
+        if distance == 0.0:
+            raise ValueError(f"camera pos {list(pos)} and lookat {list(lookat)} coincide")
+        azimuth = math.degrees(math.atan2(view[1], view[0]))
+        elevation = math.degrees(math.asin(view[2] / distance))
+        return cls(tuple(float(v) for v in lookat), distance, azimuth, elevation)
+
+
+class RGBDRenderer:
+    """Offscreen renderer for one model (one GL context per env instance): the geoms of ``geom_groups``,
+    no sites, seen through a fixed camera of the model or a :class:`FreeCamera`."""
+
+    def __init__(
+        self,
+        model,
+        width: int,
+        height: int,
+        max_geom: int = 2000,
+        geom_groups: Sequence[int] = (RENDER_GROUP,),
+    ):
         import mujoco
 
         if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
@@ -71,10 +109,10 @@ class RGBDRenderer:
             self._scene.flags[getattr(mujoco.mjtRndFlag, flag)] = 0
         self._opt = mujoco.MjvOption()
         self._opt.geomgroup[:] = 0
-        self._opt.geomgroup[RENDER_GROUP] = 1
+        for group in geom_groups:
+            self._opt.geomgroup[group] = 1
         self._opt.sitegroup[:] = 0
         self._cam = mujoco.MjvCamera()
-        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._rect = mujoco.MjrRect(0, 0, width, height)
         self._rgb = np.empty((height, width, 3), dtype=np.uint8)
         self._zbuf = np.empty((height, width), dtype=np.float32)
@@ -86,11 +124,21 @@ class RGBDRenderer:
             atexit.register(_close_open_renderers)
         _OPEN.add(self)
 
-    def render(self, data, camera: str, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
-        """(RGB uint8 HxWx3, depth in metres float32 HxW or None) for ``camera`` at ``data``'s state."""
+    def render(self, data, camera: str | FreeCamera, depth: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """(RGB uint8 HxWx3, depth in metres float32 HxW or None) for ``camera`` (the name of a fixed camera
+        of the model, or a free camera) at ``data``'s state as it is: the caller runs ``mj_forward`` first
+        when ``data``'s derived quantities may be stale."""
         mj = self._mj
         self._gl.make_current()
-        self._cam.fixedcamid = self.model.camera(camera).id
+        if isinstance(camera, FreeCamera):
+            self._cam.type = mj.mjtCamera.mjCAMERA_FREE
+            self._cam.lookat[:] = camera.lookat
+            self._cam.distance = camera.distance
+            self._cam.azimuth = camera.azimuth
+            self._cam.elevation = camera.elevation
+        else:
+            self._cam.type = mj.mjtCamera.mjCAMERA_FIXED
+            self._cam.fixedcamid = self.model.camera(camera).id
         mj.mjv_updateScene(self.model, data, self._opt, None, self._cam, mj.mjtCatBit.mjCAT_ALL, self._scene)
         mj.mjr_render(self._rect, self._scene, self._con)
         mj.mjr_readPixels(self._rgb, self._zbuf if depth else None, self._rect, self._con)

@@ -72,6 +72,9 @@ for _m in ("oracle", "indicator", "indicator_balance_filter"):
         *VARIANTS[f"{_m}_n3_inverse_dynamics"],
         "--policy.critic_output_scale=return",
     ]
+# The paper's settings with the return-scaled critic output alone (state tasks).
+for _m in ("oracle", "indicator", "indicator_balance_filter"):
+    VARIANTS[f"{_m}_return_scale"] = [*METHODS[_m], "--policy.critic_output_scale=return"]
 # The paper's encoder with the same 3-step targets (it has no shared encoder for the inverse-dynamics loss).
 VARIANTS["indicator_balance_filter_paper_encoder_n3"] = [
     *VARIANTS["indicator_balance_filter_paper_encoder"],
@@ -128,6 +131,9 @@ LABELS = {
     "indicator_balance_n3_inverse_dynamics": "Indicator+Balance, 3-step, inverse dynamics",
     "indicator_filter_n3_inverse_dynamics": "Indicator+Filter, 3-step, inverse dynamics",
     "oracle_n3_inverse_dynamics_return_scale": "Oracle, 3-step, inverse dynamics, critic output x T",
+    "oracle_return_scale": "Oracle, critic output x T",
+    "indicator_return_scale": "Indicator, critic output x T",
+    "indicator_balance_filter_return_scale": "Indicator+Balance+Filter, critic output x T",
     "indicator_n3_inverse_dynamics_return_scale": "Indicator, 3-step, inverse dynamics, critic output x T",
     "indicator_balance_filter_n3_inverse_dynamics_return_scale": (
         "Indicator+Balance+Filter, 3-step, inverse dynamics, critic output x T"
@@ -171,6 +177,9 @@ STYLES = {
     "oracle_n3_inverse_dynamics_return_scale": ("navy", "--"),
     "indicator_n3_inverse_dynamics_return_scale": ("darkorange", "--"),
     "indicator_balance_filter_n3_inverse_dynamics_return_scale": ("tab:red", "--"),
+    "oracle_return_scale": ("navy", ":"),
+    "indicator_return_scale": ("darkorange", ":"),
+    "indicator_balance_filter_return_scale": ("tab:red", ":"),
     "indicator_balance_filter_paper_encoder_n3": ("dimgray", "-"),
     "oracle_no_augmentation": ("tab:blue", ":"),
     "indicator_balance_filter_inverse_dynamics_no_augmentation": ("tab:brown", "--"),

@@ -47,6 +47,38 @@ def test_start_distance_is_the_eval_goals_distance_at_reset(tmp_path):
 
     reference = experiments.start_distances(tmp_path, ["reach_state", "rope_state"])
     assert reference == {"reach_state": record["start_distance_mean"]}
+    lines = experiments.reference_lines(tmp_path, ["reach_state"])
+    assert lines == {
+        "reach_state": {"eval_final_distance": {"no movement (start distance)": reference["reach_state"]}}
+    }
+
+
+def test_rope_plots_carry_the_ceiling_random_and_not_moving_lines(tmp_path):
+    """Every rope plot draws what the task allows on its own evaluation goals: the committed ceiling.json's
+    CEM plan, uniformly random actions and not moving, averaged over the task's first eval_episodes goals."""
+    from benchmarks.experiments.presets import TASKS
+
+    record = json.loads(experiments.ROPE_CEILING.read_text())
+    n = TASKS["rope_rgbd"].eval_episodes
+    goals = record["goal_sets"][experiments.ROPE_GOAL_SET]["per_goal"][:n]
+    lines = experiments.reference_lines(tmp_path, ["rope_rgbd", "reach_state"])
+    assert set(lines) == {"rope_rgbd"}  # reach has no ceiling, and no start-distance file here
+    distance = lines["rope_rgbd"]["eval_final_distance"]
+    assert distance["ceiling: CEM with the true simulator"] == pytest.approx(
+        np.mean([g["distance"] for g in goals])
+    )
+    assert distance["no movement (start distance)"] == pytest.approx(
+        np.mean([g["start_distance"] for g in goals])
+    )
+    success = lines["rope_rgbd"]["eval_success_rate"]
+    assert success["ceiling: CEM with the true simulator"] == pytest.approx(
+        np.mean([g["distance"] < 0.1 for g in goals])
+    )
+    assert success["ceiling: CEM with the true simulator"] > success["uniformly random actions"]
+    summary = experiments.summarize({0: _eval_rows([0.6, 0.5])})
+    fig = experiments.plot({"rope_rgbd": {"oracle": summary}}, tmp_path / "rope.png", lines)
+    heights = {round(line.get_ydata()[0], 6) for line in fig.axes[1].lines[1:]}
+    assert heights == {round(v, 6) for v in distance.values()}
 
 
 def test_eval_goals_flags_goals_the_encoder_clips():

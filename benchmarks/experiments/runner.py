@@ -12,6 +12,7 @@ an interrupted one continues with ``--resume=true``), then aggregates the runs' 
 import json
 import os
 import platform
+import re
 import shlex
 import signal
 import subprocess
@@ -67,6 +68,9 @@ class ExperimentConfig:
     replot: bool = False
     plot_methods: list[str] = field(default_factory=list)
     ablation_methods: list[str] = field(default_factory=list)
+    # ceiling.json goal set of the rope reference lines (e.g. cache:10000); None: the cache of the folder's
+    # start-distance record, else cache:4000
+    rope_goal_set: str | None = None
 
     def __post_init__(self) -> None:
         for name, known, values in (
@@ -277,10 +281,69 @@ def start_distances(out: Path, tasks: list[str]) -> dict[str, float]:
     return {t: json.loads(f.read_text())["start_distance_mean"] for t, f in files.items() if f.exists()}
 
 
-def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -> plt.Figure:
+ROPE_CEILING = Path(__file__).resolve().parents[2] / "docs/results/rope_ceiling/ceiling.json"
+ROPE_GOAL_SET = (
+    "cache:4000"  # the start/goal pairs the rope tasks evaluate on unless a run names another cache
+)
+ROPE_EPSILON = 0.1  # the rope tasks' success threshold (the paper's table)
+
+
+def rope_goal_set(out: Path, task: str, goal_set: str | None = None) -> tuple[str, int]:
+    """The ceiling.json goal set and goal count matching ``task``'s evaluation in ``out``: ``goal_set`` if
+    given, else the cache (e.g. ``rope_push_10k.npz`` -> "cache:10000") of its start-distance record, else
+    ``ROPE_GOAL_SET``; the goal count of that record, else the task's eval_episodes."""
+    record = out / f"start_distance_{task}.json"
+    if not record.exists():
+        return goal_set or ROPE_GOAL_SET, TASKS[task].eval_episodes
+    measured = json.loads(record.read_text())
+    size = re.search(r"rope_push_(\d+)k\.npz", measured["command"])
+    cache = f"cache:{int(size.group(1)) * 1000}" if size else ROPE_GOAL_SET
+    return goal_set or cache, measured["episodes"]
+
+
+def reference_lines(
+    out: Path, tasks: list[str], goal_set: str | None = None
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Per task and panel, labelled horizontal lines: "no movement" on the final distance (``start_distances``)
+    and, for rope tasks, what the task allows on the same evaluation goals (``rope_ceiling.json``: the true
+    simulator's CEM plan, a uniformly random policy and not moving), on the success and distance panels."""
+    from benchmarks.experiments.rope_ceiling import ceiling_lines
+
+    lines: dict[str, dict[str, dict[str, float]]] = {}
+    for task, distance in start_distances(out, tasks).items():
+        lines.setdefault(task, {}).setdefault("eval_final_distance", {})["no movement (start distance)"] = (
+            distance
+        )
+    for task in tasks:
+        if not task.startswith("rope") or task not in TASKS or not ROPE_CEILING.exists():
+            continue
+        goals, episodes = rope_goal_set(out, task, goal_set)
+        for key, metric in (
+            ("eval_final_distance", "final_distance"),
+            ("eval_success_rate", f"success_{ROPE_EPSILON}"),
+        ):
+            ref = ceiling_lines(ROPE_CEILING, goals, episodes, metric)
+            panel = lines.setdefault(task, {}).setdefault(key, {})
+            panel["ceiling: CEM with the true simulator"] = ref["ceiling"]
+            panel["uniformly random actions"] = ref["random"]
+            panel.setdefault("no movement (start distance)", ref["not_moving"])
+    return lines
+
+
+REFERENCE_STYLES = {
+    "no movement (start distance)": ("grey", ":"),
+    "ceiling: CEM with the true simulator": ("black", "--"),
+    "uniformly random actions": ("grey", "-."),
+}
+
+
+def plot(
+    summary: dict, path: Path, reference: dict[str, dict[str, dict[str, float]]] | None = None
+) -> plt.Figure:
     """One row per task: success rate, final distance, and the reward's accuracy / FN rate and the filter's
     precision (both against ground truth). Success rate and precision keep a fixed [0, 1] axis, so a few
-    lucky evaluations do not look like learning. Returns the (saved, closed) figure."""
+    lucky evaluations do not look like learning. ``reference``: task -> panel key -> label -> a horizontal
+    line (``reference_lines``). Returns the (saved, closed) figure."""
     panels = (
         ("eval_success_rate", "success rate"),
         ("eval_final_distance", "final distance to goal"),
@@ -307,10 +370,11 @@ def plot(summary: dict, path: Path, reference: dict[str, float] | None = None) -
                 (line,) = ax.plot(x, mean, dash, color=color, lw=2, label=LABELS[method])
                 ax.fill_between(x, mean - std, mean + std, color=color, alpha=0.15)
                 legend.setdefault(LABELS[method], line)
-            if key == "eval_final_distance" and task in (reference or {}):
-                line = ax.axhline(reference[task], color="grey", ls=":", lw=1.5)
-                legend.setdefault("no movement (start distance)", line)
-            if not ax.lines:
+            drawn = bool(ax.lines)
+            for name, value in (reference or {}).get(task, {}).get(key, {}).items():
+                color, dash = REFERENCE_STYLES[name]
+                legend.setdefault(name, ax.axhline(value, color=color, ls=dash, lw=1.5))
+            if not drawn:
                 why = "nothing was filtered" if key == "filtered_gt_success_rate" else "not logged"
                 ax.text(0.5, 0.5, f"no data: {why}", ha="center", transform=ax.transAxes)
             if key in ("eval_success_rate", "filtered_gt_success_rate"):
@@ -390,11 +454,13 @@ def launch_all(cfg: ExperimentConfig) -> dict[str, float]:
     return wall
 
 
-def replot(out: Path, plot_methods: list[str], ablation_methods: list[str]) -> list[Path]:
+def replot(
+    out: Path, plot_methods: list[str], ablation_methods: list[str], rope_goal_set: str | None = None
+) -> list[Path]:
     """Redraw ``out``'s figures from its summary.json: ``comparison.png`` with ``plot_methods`` (every method
     of the summary when empty) and ``ablations.png`` with ``ablation_methods`` (none when empty)."""
     tasks = json.loads((out / "summary.json").read_text())["tasks"]
-    reference = start_distances(out, list(tasks))
+    reference = reference_lines(out, list(tasks), rope_goal_set)
     written = []
     for methods, name in ((plot_methods or None, "comparison.png"), (ablation_methods, "ablations.png")):
         if methods is not None and not methods:
@@ -411,7 +477,7 @@ def replot(out: Path, plot_methods: list[str], ablation_methods: list[str]) -> l
 def main() -> None:
     cfg = draccus.parse(ExperimentConfig)
     if cfg.replot:
-        for path in replot(cfg.out, cfg.plot_methods, cfg.ablation_methods):
+        for path in replot(cfg.out, cfg.plot_methods, cfg.ablation_methods, cfg.rope_goal_set):
             print(f"wrote {path}")
         return
     cfg.out.mkdir(parents=True, exist_ok=True)
@@ -434,7 +500,7 @@ def main() -> None:
     if included:
         meta["included_from_summaries"] = included
     (cfg.out / "summary.json").write_text(json.dumps({"meta": meta, "tasks": summary}, indent=2))
-    plot(summary, cfg.out / "comparison.png", start_distances(cfg.out, cfg.tasks))
+    plot(summary, cfg.out / "comparison.png", reference_lines(cfg.out, cfg.tasks, cfg.rope_goal_set))
     text = table(summary, cfg.table_env_steps)
     (cfg.out / "table.md").write_text(text + "\n")
     print(text)

@@ -248,7 +248,12 @@ def test_every_method_arm_has_a_label_a_style_and_valid_policy_flags():
     from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
     assert set(METHODS) == set(LABELS) == set(STYLES)
-    assert METHODS["ae"] == ["--policy.reward=ae", "--policy.balance=false", "--policy.filter=false"]
+    assert METHODS["ae"] == [
+        "--policy.preset=paper",
+        "--policy.reward=ae",
+        "--policy.balance=false",
+        "--policy.filter=false",
+    ]
     for name, flags in METHODS.items():
         args = [f.replace("--policy.", "--", 1) for f in flags]
         cfg = draccus.parse(IndicatorDDPGConfig, args=args)

@@ -8,18 +8,28 @@ from dataclasses import dataclass
 
 # Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
 # future step with probability 0.9 and keep the original goal otherwise (HER-style). Balancing names its t = T-1
-# fallback (o_{t+1}, the default) so that a run's command says what it did.
+# fallback (o_{t+1}, the default) so that a run's command says what it did. Every arm starts from the paper's
+# settings (--policy.preset=paper) and names each option it adds, so an arm means the same on state and images
+# whatever the policy's defaults are (docs/policy.md "Presets").
+PAPER = "--policy.preset=paper"
 METHODS: dict[str, list[str]] = {
-    "oracle": ["--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
-    "indicator": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
+    "oracle": [PAPER, "--policy.reward=oracle", "--policy.balance=false", "--policy.filter=false"],
+    "indicator": [PAPER, "--policy.reward=indicator", "--policy.balance=false", "--policy.filter=false"],
     "indicator_balance": [
+        PAPER,
         "--policy.reward=indicator",
         "--policy.balance=true",
         "--policy.balance_fallback=next",
         "--policy.filter=false",
     ],
-    "indicator_filter": ["--policy.reward=indicator", "--policy.balance=false", "--policy.filter=true"],
+    "indicator_filter": [
+        PAPER,
+        "--policy.reward=indicator",
+        "--policy.balance=false",
+        "--policy.filter=true",
+    ],
     "indicator_balance_filter": [
+        PAPER,
         "--policy.reward=indicator",
         "--policy.balance=true",
         "--policy.balance_fallback=next",
@@ -30,7 +40,7 @@ PAPER_METHODS = list(METHODS)
 # The paper's learned-reward baselines (appendix), for image tasks only: an AE / beta-VAE trained jointly
 # with the agent gives the reward; goals are sampled as for the other methods without balancing.
 LEARNED_REWARD_METHODS = {
-    reward: [f"--policy.reward={reward}", "--policy.balance=false", "--policy.filter=false"]
+    reward: [PAPER, f"--policy.reward={reward}", "--policy.balance=false", "--policy.filter=false"]
     for reward in ("ae", "vae")
 }
 # Variants of the paper's methods, each one flag away from it:

@@ -19,6 +19,9 @@ GT_PREFIX = OBS_PREFIX + "gt_"
 OBS_GT_ACHIEVED_GOAL = OBS_PREFIX + GT_ACHIEVED_GOAL
 OBS_GT_DESIRED_GOAL = OBS_PREFIX + GT_DESIRED_GOAL
 OBS_GT_DISTANCE = OBS_PREFIX + GT_DISTANCE
+# Recorded datasets: true on an episode's final-observation frame o_T, whose action is padding (no action follows
+# o_T; docs/dataset_format.md). Under LeRobot's ``complementary_info.`` prefix, so no policy takes it as a feature.
+ACTION_IS_PAD = "complementary_info.action_is_pad"
 
 # Evaluation episodes reset with seed EVAL_SEED_OFFSET + i, so they never share a seed with a training
 # episode, and every evaluation (trainer, scripts, benchmarks) sees the same goals.
@@ -50,6 +53,14 @@ def goal_key(observation_key: str) -> str:
     if name.startswith(GOAL_PREFIX):
         raise ValueError(f"{observation_key!r} is already a goal key")
     return f"{head}.{GOAL_PREFIX}{name}"
+
+
+def observation_key(goal: str) -> str:
+    """The observation key a goal key is the goal of: ``goal_key``'s inverse."""
+    head, _, name = goal.rpartition(".")
+    if not goal.startswith(OBS_PREFIX) or not name.startswith(GOAL_PREFIX):
+        raise ValueError(f"{goal!r} is not a goal key (observation.<...>.{GOAL_PREFIX}<name>)")
+    return f"{head}.{name.removeprefix(GOAL_PREFIX)}"
 
 
 def is_goal_key(key: str) -> bool:

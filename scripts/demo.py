@@ -18,6 +18,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from lerobot_indicator.training.plots import read_metrics
+
 BIN = Path(sys.executable).parent
 
 COMMON = [
@@ -55,11 +57,10 @@ DEMOS: dict[str, DemoPreset] = {
     "rgbd": DemoPreset(
         ["--env.type=sawyer_reach", "--env.obs_type=rgbd", "--env.camera.height=64", "--env.camera.width=64"],
         [
-            # 3-step targets + the inverse-dynamics loss: the arm that learns reach from pixels
-            # (docs/results/README.md, indicator_balance_filter_n3_inverse_dynamics); 8000 env steps: every seed
-            # of that comparison holds >= 95% success from 7000 on.
-            "--policy.n_step=3",
-            "--policy.inverse_dynamics=1.0",
+            # The policy's defaults with images (--policy.preset=auto: 3-step targets, the inverse-dynamics
+            # loss, the return-scaled critic output) learn reach from pixels (docs/results/experiments_rgbd/);
+            # 8000 env steps: every seed of the 3-step + inverse-dynamics comparison holds >= 95% success from
+            # 7000 on (docs/results/README.md, indicator_balance_filter_n3_inverse_dynamics).
             # Both cores for the updates: the demo has the machine to itself (1 thread is the default because
             # concurrent runs on 2 cores are slower with 2 threads each; docs/results/policy_updates.json).
             "--cpu_threads=2",
@@ -138,7 +139,7 @@ def main() -> int:
     print(f"\n==== demo: {demo.description} ====")
     print(f"success rate (lerobot-eval, {summary['n_episodes']} episodes): {summary['pc_success']:.1f}%")
     print(f"mean final distance to the goal (lerobot-eval): {summary['mean_final_distance_m']:.3f} m")
-    metrics = [json.loads(line) for line in (train_dir / "metrics.jsonl").read_text().splitlines()]
+    metrics = read_metrics(train_dir / "metrics.jsonl")
     last = metrics[-1]
     summary["trainer_eval"] = {k: last[k] for k in ("env_steps", "eval_success_rate", "eval_final_distance")}
     print(

@@ -46,3 +46,154 @@ def test_an_rgbd_env_left_open_exits_without_renderer_tracebacks():
                           env={**os.environ, "MUJOCO_GL": "egl"})  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "Exception ignored" not in proc.stderr and "__del__" not in proc.stderr, proc.stderr[-2000:]
+
+
+# ---------------- config errors of this package's dataclasses: one line in every CLI ----------------
+
+CAMERA_WIDTH_0 = "env:\n  type: sawyer_reach\n  obs_type: rgb\n  camera:\n    width: 0\n"
+
+
+def _in_process(monkeypatch, capsys, main, *args: str) -> tuple[int, list[str]]:
+    """A CLI ``main`` run in this process (no interpreter start-up): its exit code and its stderr lines."""
+    from lerobot_indicator.training import online
+
+    monkeypatch.setattr(sys, "argv", ["cli", *args])
+    monkeypatch.setattr(online, "init_logging", lambda: None)
+    monkeypatch.setattr(online.signal, "signal", lambda *a: None)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    return exit_info.value.code, capsys.readouterr().err.strip().splitlines()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--env.type=sawyer_reach", "--num_episodes=0"], "error: num_episodes must be > 0, got 0"),
+        (
+            ["--env.type=sawyer_reach", "--repo_id=../../escaped"],
+            "error: repo_id='../../escaped' is not a Hub",
+        ),
+        (["--config_path={yaml}"], "error: camera.width must be > 0, got 0"),
+    ],
+)
+def test_lerobot_indicator_record_config_errors_are_one_line(tmp_path, monkeypatch, capsys, args, message):
+    from lerobot.utils.constants import HF_LEROBOT_HOME
+
+    from lerobot_indicator.data import recorder
+
+    yaml = tmp_path / "env.yaml"
+    yaml.write_text(CAMERA_WIDTH_0)
+    args = [a.format(yaml=yaml) for a in args]
+    if not any(a.startswith("--repo_id") for a in args):
+        args += ["--repo_id=test/x", f"--root={tmp_path / 'ds'}"]
+    code, lines = _in_process(monkeypatch, capsys, recorder.main, *args)
+    assert code == 1 and len(lines) == 1 and lines[0].startswith(message), lines
+    assert not (tmp_path / "ds").exists() and not (HF_LEROBOT_HOME.parent.parent / "escaped").exists()
+
+
+TRAIN = ["--policy.type=indicator_ddpg", "--policy.push_to_hub=false", "--policy.device=cpu"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--env.type=sawyer_reach", "--online.backend=mpi"], "error: --online.backend must be one of"),
+        (["--env.type=sawyer_reach", "--record.repo_id=../x"], "error: --record.repo_id='../x' is not a Hub"),
+        (["--env.type=sawyer_reach", "--resume=true"], "error: --resume=true but"),
+        (["--config_path={yaml}"], "error: camera.width must be > 0, got 0"),
+        (["--config_path={tmp}/none.yaml"], "error: --config_path="),
+        # An env_configs/*.yaml as --config_path: the env comes from it, the rest from the command line.
+        (["--config_path=env_configs/sawyer_reach_state_sim.yaml", "--online.backend=mpi"],
+         "error: --online.backend must be one of"),
+    ],
+)  # fmt: skip
+def test_lerobot_indicator_train_config_errors_are_one_line(tmp_path, monkeypatch, capsys, args, message):
+    from lerobot_indicator.training import online
+
+    yaml = tmp_path / "env.yaml"
+    yaml.write_text(CAMERA_WIDTH_0)
+    args = [a.format(yaml=yaml, tmp=tmp_path) for a in args]
+    code, lines = _in_process(
+        monkeypatch, capsys, online.main, *TRAIN, *args, f"--output_dir={tmp_path / 'run'}"
+    )
+    assert code == 1 and len(lines) == 1 and lines[0].startswith(message), lines
+    assert not (tmp_path / "run").exists()
+
+
+def test_config_path_takes_an_env_file_or_a_saved_train_config(tmp_path):
+    import draccus
+
+    from lerobot_indicator.training.config import OnlineTrainConfig
+
+    cfg = OnlineTrainConfig.from_pretrained(
+        "env_configs/sawyer_reach_state_sim.yaml", cli_args=[*TRAIN, "--steps=123"]
+    )
+    assert cfg.env.type == "sawyer_reach" and cfg.env.obs_type == "state" and cfg.steps == 123
+    cfg = draccus.parse(OnlineTrainConfig, args=[*TRAIN, "--env.type=rope_push", "--steps=77", "--seed=5"])
+    cfg._save_pretrained(tmp_path)
+    again = OnlineTrainConfig.from_pretrained(tmp_path, cli_args=["--seed=6"])
+    assert (again.env.type, again.steps, again.seed, again.policy.type) == (
+        "rope_push",
+        77,
+        6,
+        "indicator_ddpg",
+    )
+
+
+# ---------------- start-up checks of a policy's inputs against the env or dataset ----------------
+
+
+def _image_policy_config(size: int):
+    from lerobot.configs import FeatureType, PolicyFeature
+
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+
+    img = PolicyFeature(type=FeatureType.VISUAL, shape=(3, size, size))
+    cfg = IndicatorDDPGConfig(device="cpu", horizon=25, observation_keys=["observation.images.front"])
+    cfg.input_features = {"observation.images.front": img, "observation.images.goal_front": img}
+    cfg.output_features = {"action": PolicyFeature(type=FeatureType.ACTION, shape=(3,))}
+    return cfg
+
+
+@pytest.mark.parametrize(
+    ("env_args", "fix"),
+    [
+        (["--env.obs_type=state"], "use --env.obs_type=rgb --env.camera.height=32 --env.camera.width=32"),
+        (["--env.obs_type=rgb"], "use --env.camera.height=32 --env.camera.width=32"),
+    ],
+)
+def test_a_pretrained_policy_for_other_observations_is_refused_at_start_with_the_fix(
+    tmp_path, monkeypatch, capsys, env_args, fix
+):
+    from lerobot_indicator.training import online
+
+    _image_policy_config(32).save_pretrained(tmp_path / "policy")
+    args = [f"--policy.path={tmp_path / 'policy'}", "--policy.device=cpu", "--policy.push_to_hub=false",
+            "--env.type=sawyer_reach", *env_args, f"--output_dir={tmp_path / 'run'}"]  # fmt: skip
+    code, lines = _in_process(monkeypatch, capsys, online.main, *args)
+    assert code == 1 and len(lines) == 1, lines
+    assert "observation.images.front" in lines[0] and lines[0].endswith(fix), lines[0]
+    assert not (tmp_path / "run").exists()  # refused before anything is built
+
+
+def test_a_pretrained_policy_on_a_dataset_of_other_image_sizes_is_refused_when_made():
+    """lerobot-train: make_policy gives the policy the dataset's metadata; a pretrained policy keeps its own
+    input features, so the dataset's are checked against them."""
+    from types import SimpleNamespace
+
+    from lerobot_indicator.policy.input_checks import PolicyInputError
+    from lerobot_indicator.policy.modeling_indicator_ddpg import IndicatorDDPGPolicy
+
+    image = {"dtype": "image", "shape": (64, 64, 3), "names": ["height", "width", "channels"]}
+    features = {"observation.images.front": image, "observation.images.goal_front": image}
+    meta = SimpleNamespace(features=features, repo_id="user/reach_64px", episodes=None)
+    with pytest.raises(PolicyInputError) as err:
+        IndicatorDDPGPolicy(_image_policy_config(32), dataset_meta=meta)
+    message = str(err.value)
+    assert (
+        "dataset user/reach_64px" in message
+        and "observation.images.front (3, 32, 32) vs (3, 64, 64)" in message
+    )
+    meta.features = {k: {**v, "shape": (32, 32, 3)} for k, v in features.items()}
+    IndicatorDDPGPolicy(_image_policy_config(32), dataset_meta=meta)  # the same sizes: made

@@ -14,7 +14,10 @@ N_FRAMES = 2 + len(OFFSETS)
 
 
 def config() -> IndicatorDDPGConfig:
-    return IndicatorDDPGConfig(device="cpu", horizon=4, observation_keys=[STATE], future_offsets=OFFSETS)
+    # n_step=1: what the policy resolves to for lerobot-train samples, which hold no frames in between.
+    return IndicatorDDPGConfig(
+        device="cpu", horizon=4, observation_keys=[STATE], future_offsets=OFFSETS, n_step=1
+    )
 
 
 def frames(n: int, device: str = "cpu") -> dict[str, torch.Tensor]:

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from lerobot_indicator.envs import SawyerGoalEnvConfig, SawyerReachEnvConfig
+from lerobot_indicator.envs import GoalEnvConfig, SawyerReachEnvConfig
 from lerobot_indicator.envs.configs import load_env_config, save_env_config
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 
@@ -20,7 +20,7 @@ def test_config_dir_has_the_documented_files():
 @pytest.mark.parametrize("path", CONFIG_FILES, ids=lambda p: p.stem)
 def test_config_files_load_and_round_trip(path, tmp_path):
     cfg = load_env_config(path)
-    assert isinstance(cfg, SawyerGoalEnvConfig)
+    assert isinstance(cfg, GoalEnvConfig)
     out = tmp_path / "round_trip.yaml"
     save_env_config(cfg, out)
     again = load_env_config(out)

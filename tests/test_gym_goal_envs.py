@@ -321,3 +321,30 @@ def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path):
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
     assert (tmp_path / "run" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").exists()
+
+
+@pytest.mark.parametrize(
+    "task,obs_type,compared,context",
+    [
+        ("reacher", "rgb", ["observation.images.front"], []),
+        ("reacher", "state", ["observation.state"], ["observation.environment_state"]),
+        ("fetch_reach", "rgbd", ["observation.images.front", "observation.images.front_depth"], []),
+        ("fetch_reach", "state", ["observation.state"], ["observation.environment_state"]),
+        ("fetch_push", "state", ["observation.state"], ["observation.environment_state"]),
+    ],
+)
+def test_policy_defaults_compare_the_goal_state_and_condition_on_the_environment_state(
+    task, obs_type, compared, context
+):
+    """docs/envs.md's table: with no key flags the policy compares the keys with a goal and, for state
+    observations, conditions on ``observation.environment_state`` (context, never compared)."""
+    from lerobot.configs import FeatureType
+
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+
+    features = env_to_policy_features(make_env_config(task, obs_type=obs_type))
+    cfg = IndicatorDDPGConfig(device="cpu", horizon=50)
+    cfg.output_features = {k: f for k, f in features.items() if f.type is FeatureType.ACTION}
+    cfg.input_features = {k: f for k, f in features.items() if f.type is not FeatureType.ACTION}
+    cfg.validate_features()
+    assert sorted(cfg.observation_keys) == sorted(compared) and cfg.context_keys == context

@@ -30,11 +30,16 @@ REWARDS = [(1.0, -1.0), (0.0, -1.0)]
 def make_policy(
     state_dim: int = 1, action_dim: int = 1, keys: tuple[str, ...] = (STATE,), **kwargs
 ) -> IndicatorDDPGPolicy:
-    """A tiny state policy: every compared key has ``state_dim`` dims, one hidden layer of 2 units."""
+    """A tiny state policy: every compared key has ``state_dim`` dims, one hidden layer of 2 units, and Q the
+    MLP's output (critic_output_scale="paper"), which the reference computations read."""
     goals = {STATE: GOAL, VEL: GOAL_VEL}
-    cfg = IndicatorDDPGConfig(
-        device="cpu", **{"hidden_dims": [2], "horizon": T, "observation_keys": list(keys), **kwargs}
-    )
+    defaults = {
+        "hidden_dims": [2],
+        "horizon": T,
+        "observation_keys": list(keys),
+        "critic_output_scale": "paper",
+    }
+    cfg = IndicatorDDPGConfig(device="cpu", **{**defaults, **kwargs})
     cfg.input_features = {}
     for k in keys:
         cfg.input_features[k] = PolicyFeature(FeatureType.STATE, (state_dim,))

@@ -49,10 +49,12 @@ GAMMA = (T - 1) / T
 
 def image_policy(image_encoder: str = "drq", **kwargs) -> IndicatorDDPGPolicy:
     """A tiny image policy whose four networks (and so the online and target encoders) have distinct seeded
-    weights; the target critic's last layer is scaled down so that TD targets stay inside (q_min, q_max)."""
+    weights; the target critic's last layer is scaled down so that TD targets stay inside (q_min, q_max). The
+    paper's preset (one-step target, no inverse dynamics, Q the MLP's output) unless a test names others."""
     cfg = IndicatorDDPGConfig(
         device="cpu",
         **{
+            "preset": "paper",
             "observation_keys": [IMG],
             "horizon": T,
             "hidden_dims": [4],

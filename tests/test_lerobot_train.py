@@ -191,7 +191,12 @@ def test_rgbd_dataset_batch_trains_through_lerobot_factories(tmp_path: Path):
     ds.finalize()
 
     cfg = IndicatorDDPGConfig(
-        device="cpu", observation_keys=keys, horizon=4, future_offsets=[2, 3], image_encoder="paper"
+        device="cpu",
+        observation_keys=keys,
+        horizon=4,
+        future_offsets=[2, 3],
+        image_encoder="paper",
+        episode_end_goal=False,  # the data has goal columns: no episode-end frame to fetch
     )
     cfg.hidden_dims, cfg.conv_channels = [16, 16, 16], [4, 4, 4, 4]
     meta = LeRobotDataset("local/tiny_rgbd", root=tmp_path / "d").meta

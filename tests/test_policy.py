@@ -40,7 +40,7 @@ def rgbd_config(**kwargs) -> IndicatorDDPGConfig:
 @pytest.mark.parametrize(
     ("inputs", "keys", "message"),
     [
-        ({STATE: vec()}, [STATE], "has no goal 'observation.goal_state'"),
+        ({STATE: vec(), RGB: img(3), GOAL_RGB: img(3)}, [STATE], "has no goal 'observation.goal_state'"),
         ({GOAL: vec()}, [STATE], "goal key 'observation.goal_state' has no observation"),
         ({STATE: vec(3), GOAL: vec(2)}, [STATE], "must be identical"),
         ({"observation.gt_achieved_goal": vec()}, ["observation.gt_achieved_goal"], "ground-truth key"),
@@ -165,7 +165,7 @@ def dataset_batch(batch_size: int, offsets: list[int], pad_from: torch.Tensor) -
 
 
 def test_dataset_batch_picks_a_valid_future_offset_uniformly():
-    cfg = make_config({STATE: vec(), GOAL: vec()}, future_offsets=[2, 4, 8, 16])
+    cfg = make_config({STATE: vec(), GOAL: vec()}, future_offsets=[2, 4, 8, 16], n_step=1)
     n = 20_000
     pad_from = torch.tensor([6, 4, 2, 1]).repeat(n // 4)  # all valid / offsets 2,4 / none / no o_{t+1}
     out = core.dataset_batch_to_transitions(
@@ -397,7 +397,7 @@ def test_default_keys_are_the_cameras_never_the_state_and_state_is_logged_when_c
         make_config(inputs, observation_keys=[STATE]).validate_features()
     assert "although the data has the camera keys" in caplog.text and RGB in caplog.text
     with pytest.raises(ValueError, match="no observation key with a goal"):
-        make_config({STATE: vec()}, observation_keys=None).validate_features()
+        make_config({GOAL: vec()}, observation_keys=None).validate_features()
 
 
 def test_horizon_comes_from_the_data_and_a_different_given_value_is_an_error():
@@ -421,7 +421,7 @@ def test_horizon_comes_from_the_data_and_a_different_given_value_is_an_error():
 
 
 def test_critic_output_scale_is_one_or_the_horizon_and_is_checked():
-    assert IndicatorDDPGConfig(device="cpu", horizon=25).q_output_scale == 1.0
+    assert IndicatorDDPGConfig(device="cpu", horizon=25, critic_output_scale="paper").q_output_scale == 1.0
     assert IndicatorDDPGConfig(device="cpu", horizon=25, critic_output_scale="return").q_output_scale == 25.0
     with pytest.raises(
         IndicatorDDPGConfigError, match=r"critic_output_scale must be one of \('paper', 'return'\)"

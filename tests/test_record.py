@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from draccus.utils import ParsingError
 from huggingface_hub import constants as hf_constants
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -21,7 +20,7 @@ from lerobot_indicator.data.checkpoint import JOURNAL_DIR
 from lerobot_indicator.data.recorder import RecordConfig, make_single_env, record
 from lerobot_indicator.data.storage import DepthRangeError, check_depth_range
 from lerobot_indicator.envs import RopePushEnvConfig, SawyerReachEnvConfig
-from lerobot_indicator.keys import goal_key
+from lerobot_indicator.keys import ACTION_IS_PAD, goal_key
 
 REPO = Path(__file__).resolve().parents[1]
 T = 3  # steps per tiny episode
@@ -101,6 +100,7 @@ def test_recorded_features_reload_offline(tmp_path, monkeypatch, task, obs_type)
         "action": ("float32", (cfg.action_dim,)),
         "next.reward": ("float32", (1,)),
         "next.done": ("bool", (1,)),
+        ACTION_IS_PAD: ("bool", (1,)),
         **EXTRA_FEATURES[task],
     }
     if obs_type == "rgbd":
@@ -128,11 +128,12 @@ def test_recorded_features_reload_offline(tmp_path, monkeypatch, task, obs_type)
     for i, item in enumerate(items):
         t = item["frame_index"].item()
         assert item["next.done"].item() is (t >= T - 1)
+        assert item[ACTION_IS_PAD].item() is (t == T)
         if t < T:  # R+ iff o_{t+1} equals the goal on every compared key, bit for bit
             hit = all(torch.equal(items[i + 1][k], item[goal_key(k)]) for k in compared)
             assert item["next.reward"].item() == (1.0 if hit else -1.0)
-        else:  # the final-observation frame: no transition
-            assert item["next.reward"].item() == 0.0 and not item["action"].any()
+        else:  # the final-observation frame: no transition; its action is padding, a copy of a_{T-1}
+            assert item["next.reward"].item() == 0.0 and torch.equal(item["action"], items[i - 1]["action"])
         assert torch.all(item["action"].abs() <= 1.0)
         dist = torch.linalg.norm(item["observation.gt_achieved_goal"] - item["observation.gt_desired_goal"])
         assert item["observation.gt_distance"].item() == pytest.approx(dist.item(), abs=1e-5)
@@ -468,10 +469,10 @@ def test_cli_rejects_unknown_env_type(tmp_path, monkeypatch, capsys):
 
 
 @pytest.mark.parametrize("num_episodes", [0, -3])
-def test_rejects_non_positive_num_episodes(tmp_path, monkeypatch, num_episodes):
+def test_rejects_non_positive_num_episodes(tmp_path, monkeypatch, capsys, num_episodes):
     with pytest.raises(ValueError, match="num_episodes must be > 0"):
         RecordConfig(env=env_cfg(), repo_id="test/x", num_episodes=num_episodes)
-    with pytest.raises(ParsingError) as err:
+    with pytest.raises(SystemExit) as err:
         _cli(
             monkeypatch,
             "--env.type=sawyer_reach",
@@ -479,7 +480,8 @@ def test_rejects_non_positive_num_episodes(tmp_path, monkeypatch, num_episodes):
             f"--root={tmp_path / 'ds'}",
             f"--num_episodes={num_episodes}",
         )
-    assert "num_episodes must be > 0" in str(err.value.__cause__)
+    assert err.value.code == 1
+    assert capsys.readouterr().err == f"error: num_episodes must be > 0, got {num_episodes}\n"
     assert not (tmp_path / "ds").exists()
 
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from benchmarks.experiments.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
 from lerobot_indicator.stop_signals import Interrupted, exit_code, raise_interrupted, stopping_signal
+from lerobot_indicator.training.plots import read_metrics
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -89,9 +90,8 @@ def run_dir(cfg: ExperimentConfig, task: str, method: str, seed: int) -> Path:
 
 
 def read_rows(path: Path) -> list[dict]:
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    """A run's metrics rows (none before it starts), a torn last line skipped, null as NaN."""
+    return read_metrics(path) if path.exists() else []
 
 
 class RunFailedError(RuntimeError):

@@ -2,7 +2,6 @@
 ``LeRobotDataset.__getitem__`` with the policy's delta indices and without, the per-key decode, frame equality
 of the stored copies, and ``lerobot-indicator-train`` from the in-memory buffer."""
 
-import json
 import os
 import re
 import shlex
@@ -22,6 +21,7 @@ from benchmarks.speed.dataset_loading import (
 )
 from lerobot_indicator import process
 from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+from lerobot_indicator.training.plots import read_metrics
 
 BIN = Path(sys.executable).parent
 ENV = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
@@ -153,7 +153,7 @@ def offline_path(env_args: list[str], root: Path, out: Path, batch_size: int, up
          f"--online.batch_size={batch_size}", f"--online.updates_per_cycle={updates}",
          f"--steps={updates * 2}", "--env_eval_freq=0", "--online.eval_episodes=1", "--save_checkpoint=false",
          f"--output_dir={out}"])  # fmt: skip
-    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines()]
+    rows = read_metrics(out / "metrics.jsonl")
     cycle_s = rows[1]["wall_time_s"] - rows[0]["wall_time_s"]
     return {
         "process_wall_s": time.perf_counter() - t0,

@@ -34,7 +34,11 @@ STATE_FEATURES: Features = {"observation.state": (FeatureType.STATE, (3,))}
 
 
 def make_policy(features: Features, device: str = "cpu", **config: object) -> IndicatorDDPGPolicy:
-    cfg = IndicatorDDPGConfig(device=device, observation_keys=list(features), **{"horizon": 25, **config})
+    """A policy for ``features`` with ``config``'s fields over the paper's preset: each arm names what it adds
+    (n_step, inverse_dynamics), so its batch and its committed numbers keep their meaning."""
+    cfg = IndicatorDDPGConfig(
+        device=device, observation_keys=list(features), **{"horizon": 25, "preset": "paper", **config}
+    )
     cfg.input_features = {}
     for key, (ftype, shape) in features.items():
         cfg.input_features[key] = cfg.input_features[goal_key(key)] = PolicyFeature(ftype, shape)

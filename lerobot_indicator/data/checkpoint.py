@@ -14,7 +14,8 @@ closed and :func:`commit_episode` brings them into ``<root>``:
 2. the new files are hard-linked into ``<root>`` under their own, new names (videos, then data, then
    episode metadata: a file is in place before anything refers to it), so a reader of the previous
    state never meets a half-written file;
-3. ``tasks.parquet``, ``stats.json`` and, last, ``info.json`` are replaced atomically: ``info.json`` is
+3. ``tasks.parquet``, ``stats.json``, the content hashes (data/integrity.py: the new files' hashes
+   added to those of the committed ones) and, last, ``info.json`` are replaced atomically: ``info.json`` is
    the commit point.
 
 ``<root>`` is thus a complete dataset at every instant and LeRobot reads it as it is, whatever ends the
@@ -36,20 +37,21 @@ from pathlib import Path
 import PIL.Image
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+from lerobot_indicator.data.errors import DatasetError
+from lerobot_indicator.data.integrity import HASHES, INFO, updated_hashes
 from lerobot_indicator.data.storage import video_encoders
 
 JOURNAL_DIR = ".recording"
 STAGE_DIR = "stage"
 PUBLISH_DIR = "publish"
 COMMIT_FILE = "commit.json"
-INFO = "meta/info.json"
 # What LeRobot's ``resume`` reads besides the last episode-metadata file.
 RESUME_META = (INFO, "meta/stats.json", "meta/tasks.parquet")
 # Directories where LeRobot starts new files, in commit order: videos and data rows before the
 # episode metadata that refers to them.
 NEW_FILE_DIRS = ("videos", "data", "meta/episodes")
 # Replaced in this order: info.json (the episode count) last.
-COMMITTED_META = ("meta/tasks.parquet", "meta/stats.json", INFO)
+COMMITTED_META = ("meta/tasks.parquet", "meta/stats.json", HASHES, INFO)
 
 
 def write_atomic(path: Path, content: str | bytes) -> None:
@@ -118,10 +120,11 @@ def commit_episode(root: Path, info: dict, committed: set[str]) -> set[str]:
     publish = journal / PUBLISH_DIR
     (publish / "meta").mkdir(parents=True, exist_ok=True)
     new = [rel for rel in staged_files(stage) if rel not in committed]
+    (publish / HASHES).write_text(updated_hashes(root, stage, info, new), encoding="utf-8")
     (publish / INFO).write_text(info_json(info), encoding="utf-8")
     for rel in COMMITTED_META:
         # Moved, not copied: LeRobot writes these from memory, tasks.parquet only when a task is new.
-        if rel != INFO and (stage / rel).exists():
+        if rel not in (HASHES, INFO) and (stage / rel).exists():
             os.replace(stage / rel, publish / rel)
     replace = [rel for rel in COMMITTED_META if (publish / rel).exists()]
     commit = {"total_episodes": info["total_episodes"], "link": new, "replace": replace}
@@ -209,7 +212,7 @@ def committed_counts(root: Path) -> tuple[int, int]:
 # ---------------- LeRobot's writer in the stage ----------------
 
 
-class CorruptFrameError(RuntimeError):
+class CorruptFrameError(DatasetError, RuntimeError):
     """An image/video frame file of the episode being saved cannot be read back."""
 
 
@@ -274,7 +277,14 @@ class StagedRecording:
 
     @classmethod
     def create(
-        cls, root: Path, repo_id: str, fps: int, features: dict, use_videos: bool, image_writer_threads: int
+        cls,
+        root: Path,
+        repo_id: str,
+        fps: int,
+        features: dict,
+        use_videos: bool,
+        image_writer_threads: int,
+        robot_type: str | None = None,
     ) -> StagedRecording:
         """A new, empty dataset at ``root`` (its ``info.json`` is written at once, with 0 episodes)."""
         dataset = LeRobotDataset.create(
@@ -282,6 +292,7 @@ class StagedRecording:
             fps=fps,
             features=features,
             root=stage_root(root),
+            robot_type=robot_type,
             use_videos=use_videos,
             video_backend="pyav",
             image_writer_threads=image_writer_threads,

@@ -7,16 +7,46 @@ exposes for its ``obs_type`` is recorded, under the batch key the policy will la
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import contextlib
+from collections.abc import Mapping, Sequence
 
 import gymnasium as gym
 import numpy as np
 from lerobot.utils.constants import ACTION, OBS_IMAGES, OBS_STATE, OBS_STR
 from lerobot.utils.feature_utils import hw_to_dataset_features
 
-from lerobot_indicator.keys import DEPTH_SUFFIX, GT_INFO_KEYS, ground_truth_key
+from lerobot_indicator.keys import ACTION_IS_PAD, DEPTH_SUFFIX, GOAL_PREFIX, GT_INFO_KEYS, ground_truth_key
 
 REWARD, DONE = "next.reward", "next.done"
+
+
+def env_feature_names(vec_env) -> dict[str, list[str]]:
+    """The env's per-dimension names by env key (``feature_names()`` of the tasks here; {} for other envs)."""
+    with contextlib.suppress(AttributeError, NotImplementedError):
+        return dict(vec_env.call("feature_names")[0])
+    return {}
+
+
+def env_robot_type(vec_env) -> str | None:
+    """The env's ``robot_type`` (the tasks here name theirs), for the dataset's ``meta/info.json``."""
+    with contextlib.suppress(AttributeError, NotImplementedError):
+        return str(vec_env.call("robot_type")[0])
+    return None
+
+
+def _names(names: Mapping[str, Sequence[str]], env_key: str, shape: tuple[int, ...]) -> list[str]:
+    """Per-dimension names of a flat vector: the env's (a ``goal_<key>`` takes those of ``<key>``), else
+    ``<key>_<i>``."""
+    given = names.get(env_key)
+    if given is None and env_key.startswith(GOAL_PREFIX):
+        base = env_key.removeprefix(GOAL_PREFIX)  # goal_state is agent_pos's goal (docs/conventions.md)
+        given = names.get("agent_pos" if base == "state" else base)
+    size = int(np.prod(shape))
+    if given is None:
+        return [f"{env_key}_{i}" for i in range(size)]
+    if len(given) != size:
+        raise ValueError(f"feature names of {env_key!r}: {len(given)} names for shape {tuple(shape)}")
+    return [str(n) for n in given]
 
 
 def observation_key(env_key: str) -> str:
@@ -42,13 +72,17 @@ def dataset_features(
     action_space: gym.spaces.Box,
     info: Mapping[str, np.ndarray],
     use_videos: bool,
+    names: Mapping[str, Sequence[str]] | None = None,
 ) -> dict[str, dict]:
     """LeRobot feature dict for one env (unbatched spaces) and an info dict from its ``reset``.
 
     ``pixels[k]`` -> ``observation.images.k`` (RGB); depth, either nested ``depth[k]`` or top-level
     ``k_depth`` (uint16 HxWx1), -> ``observation.images.k_depth`` (``is_depth_map``); ``agent_pos`` ->
     ``observation.state``; other boxes -> ``observation.<key>``; ``info["gt_*"]`` -> ``observation.gt_*``.
+    Every vector carries per-dimension ``names``: ``names`` by env key (``env_feature_names``), else
+    ``<key>_<i>``. ``ACTION_IS_PAD`` marks the final-observation frame (docs/dataset_format.md).
     """
+    names = names or {}
     if not isinstance(observation_space, gym.spaces.Dict):
         raise TypeError(f"expected a Dict observation space (docs/conventions.md), got {observation_space}")
     features: dict[str, dict] = {}
@@ -61,16 +95,18 @@ def dataset_features(
         elif _is_camera(space):  # e.g. top-level ``front_depth`` (uint16 HxWx1)
             cameras[key] = tuple(space.shape)
         elif isinstance(space, gym.spaces.Box):
-            features[observation_key(key)] = _vector_feature(space.shape)
+            features[observation_key(key)] = _vector_feature(space.shape, _names(names, key, space.shape))
         else:
             raise TypeError(f"observation {key!r} has unsupported space {space}")
     features.update(hw_to_dataset_features(cameras, OBS_STR, use_video=use_videos))
     for key in GT_INFO_KEYS:
         if key in info:
-            features[ground_truth_key(key)] = _vector_feature(np.atleast_1d(np.asarray(info[key])).shape)
-    features[ACTION] = _vector_feature(action_space.shape)
-    features[REWARD] = _vector_feature((1,))
-    features[DONE] = {"dtype": "bool", "shape": (1,), "names": None}
+            shape = np.atleast_1d(np.asarray(info[key])).shape
+            features[ground_truth_key(key)] = _vector_feature(shape, _names(names, key, shape))
+    features[ACTION] = _vector_feature(action_space.shape, _names(names, ACTION, action_space.shape))
+    features[REWARD] = _vector_feature((1,), ["reward"])
+    features[DONE] = {"dtype": "bool", "shape": (1,), "names": ["done"]}
+    features[ACTION_IS_PAD] = {"dtype": "bool", "shape": (1,), "names": ["action_is_pad"]}
     return features
 
 

@@ -3,9 +3,10 @@
 Frame ``t`` of an episode holds ``o_t`` (observation, goal observation, ground truth), ``a_t``, and
 ``next.reward``/``next.done`` of the transition ``o_t -a_t-> o_{t+1}``; LeRobot's usual layout, so
 ``lerobot-train`` reads ``o_{t+1}`` as the next frame. An episode of T steps has **T + 1 frames**: the
-last one holds only the final observation ``o_T`` (zero action, reward 0, done), so that every one of
-the T transitions has its ``o_{t+1}`` (for rope push, T = 3, dropping it would lose a third of the
-data). ``indicator_ddpg`` never samples that frame as ``o_t`` (``drop_n_last_frames=1``). ``next.reward`` is the *indicator* reward:
+last one holds only the final observation ``o_T`` (reward 0, done; no action follows ``o_T``, so its
+action repeats ``a_{T-1}``, LeRobot's own padding, and ``complementary_info.action_is_pad`` marks it), so
+that every one of the T transitions has its ``o_{t+1}`` (for rope push, T = 3, dropping it would lose a
+third of the data). ``indicator_ddpg`` never samples that frame as ``o_t`` (``drop_n_last_frames=1``). ``next.reward`` is the *indicator* reward:
 R+ only if ``o_{t+1}`` equals the episode's goal observation bit for bit on the compared keys.
 See docs/dataset_format.md.
 
@@ -18,6 +19,8 @@ loses at most the episode in flight, and ``--resume=true`` never removes a saved
 import contextlib
 import json
 import logging
+import re
+import shlex
 import signal
 import sys
 import threading
@@ -29,6 +32,7 @@ import draccus
 import numpy as np
 import pyarrow.parquet as pq
 import torch
+import yaml
 from lerobot.configs import parser
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 from lerobot.envs.configs import EnvConfig
@@ -53,13 +57,30 @@ from lerobot_indicator.data.features import (
     REWARD,
     batch,
     dataset_features,
+    env_feature_names,
+    env_robot_type,
     observation_frame,
     unbatch,
 )
 from lerobot_indicator.data.storage import check_depth_range
-from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
+from lerobot_indicator.io_errors import report_line
+from lerobot_indicator.keys import ACTION_IS_PAD, goal_key, is_goal_key, is_ground_truth_key
 from lerobot_indicator.policy.indicator_core import indicator_reward
 from lerobot_indicator.stop_signals import Interrupted, exit_code
+
+# A Hub dataset id: namespace/name, each of letters, digits, '-', '_', '.' (not at either end, no '..' or
+# '--'), so $HF_LEROBOT_HOME/<repo_id> stays a directory two levels inside $HF_LEROBOT_HOME.
+_REPO_PART = r"[A-Za-z0-9](?:[A-Za-z0-9._-]{0,94}[A-Za-z0-9])?"
+REPO_ID = re.compile(rf"{_REPO_PART}/{_REPO_PART}")
+
+
+def check_repo_id(repo_id: str, flag: str = "repo_id") -> None:
+    """``repo_id`` is a Hub dataset id ``namespace/name`` (``flag``: the option named in the error)."""
+    if not REPO_ID.fullmatch(repo_id) or ".." in repo_id or "--" in repo_id:
+        raise ValueError(
+            f"{flag}={repo_id!r} is not a Hub dataset id 'namespace/name' (letters, digits, '-', '_', '.'; "
+            "e.g. <user>/sawyer_reach_scripted)"
+        )
 
 
 @dataclass
@@ -94,6 +115,7 @@ class RecordConfig:
     def __post_init__(self):
         if not self.repo_id:
             raise ValueError("repo_id is required, e.g. --repo_id=<user>/sawyer_reach_scripted")
+        check_repo_id(self.repo_id)
         if self.num_episodes <= 0:
             raise ValueError(f"num_episodes must be > 0, got {self.num_episodes}")
         if self.image_writer_threads < 0:
@@ -206,11 +228,16 @@ class _StopSignals:
             raise RecordingInterrupted(self.pending)
 
 
+def env_settings(env: EnvConfig) -> dict:
+    """The env config as plain JSON/YAML values, without the fields about how envs are run."""
+    fields = {k: v for k, v in draccus.encode(env).items() if k not in _RUNNER_FIELDS}
+    return json.loads(json.dumps({"type": env.type, **fields}, default=str))
+
+
 def recording_settings(cfg: RecordConfig) -> dict:
     """What a dataset's episodes depend on besides the policy and seed: the env config and the reward."""
-    env = {k: v for k, v in draccus.encode(cfg.env).items() if k not in _RUNNER_FIELDS}
     settings = {
-        "env": {"type": cfg.env.type, **env},
+        "env": env_settings(cfg.env),
         "reward_keys": sorted(cfg.reward_keys or []),
         "r_pos": cfg.r_pos,
         "r_neg": cfg.r_neg,
@@ -266,6 +293,8 @@ def _check_resume(cfg: RecordConfig, features: dict, horizon: int | None) -> Non
     root = cfg.root
     info = json.loads((root / INFO).read_text())
     stored = info["features"]
+    if ACTION_IS_PAD not in stored:  # a dataset without the final-frame marker goes on without it
+        features = {k: v for k, v in features.items() if k != ACTION_IS_PAD}
     existing = {k: v for k, v in stored.items() if k in features}
     if _comparable(existing) != _comparable(features) or set(features) - set(stored):
         raise SettingsMismatchError(
@@ -306,15 +335,18 @@ def _check_resume(cfg: RecordConfig, features: dict, horizon: int | None) -> Non
             logging.warning("%s has no %s: only fps and the horizon were checked", root, SETTINGS_FILE)
 
 
-def open_recording(cfg: RecordConfig, features: dict, horizon: int | None) -> StagedRecording:
-    """The dataset at ``cfg.root`` behind data/checkpoint.py's per-episode commits: created, or with
-    ``cfg.resume`` recovered from any interruption, checked against this run's settings and reopened.
-    Used by :func:`record` and the online trainer's ``--record.*``."""
+def open_recording(
+    cfg: RecordConfig, features: dict, horizon: int | None, robot_type: str | None = None
+) -> StagedRecording:
+    """The dataset at ``cfg.root`` behind data/checkpoint.py's per-episode commits: created (``robot_type``
+    into its ``meta/info.json``), or with ``cfg.resume`` recovered from any interruption, checked against
+    this run's settings and reopened. Used by :func:`record` and the online trainer's ``--record.*``."""
     check_root(cfg)
     if not cfg.resume:
         session = StagedRecording.create(
-            cfg.root, cfg.repo_id, cfg.env.fps, features, cfg.use_videos, cfg.image_writer_threads
-        )
+            cfg.root, cfg.repo_id, cfg.env.fps, features, cfg.use_videos, cfg.image_writer_threads,
+            robot_type=robot_type,
+        )  # fmt: skip
         _write_settings(cfg)
         return session
     recover_recording(cfg.root)  # finish a commit cut short, drop the episode that was being saved
@@ -322,15 +354,122 @@ def open_recording(cfg: RecordConfig, features: dict, horizon: int | None) -> St
     return StagedRecording.resume(cfg.root, cfg.repo_id, cfg.image_writer_threads)
 
 
-def _dataset_card(cfg: RecordConfig) -> str:
-    env_yaml = draccus.dump(cfg.env)
-    return (
-        f"Goal-conditioned episodes of the **{cfg.env.type}** task recorded with lerobot-indicator's "
-        f"`scripts/record.py` (policy: `{cfg.policy}`, seed {cfg.seed}) for *Reinforcement Learning "
-        "without Ground-Truth State* (Lin, Baweja, Held, CoRL 2019). `next.reward` is the indicator "
-        f"reward ({cfg.r_pos} iff the next observation equals the goal observation bit for bit on "
-        f"{cfg.reward_keys}, else {cfg.r_neg}); `observation.gt_*` are ground truth for evaluation only.\n\n"
-        f"Env config:\n\n```yaml\n{env_yaml}```\n"
+PAPER = "https://arxiv.org/abs/1905.07866"
+CITATION_BIBTEX = """@inproceedings{lin2019reinforcement,
+  title     = {Reinforcement Learning without Ground-Truth State},
+  author    = {Lin, Xingyu and Baweja, Harjatin Singh and Held, David},
+  booktitle = {Conference on Robot Learning (CoRL)},
+  year      = {2019},
+  eprint    = {1905.07866},
+  archivePrefix = {arXiv}
+}"""
+# What simulates each robot the tasks use (meta/info.json's robot_type).
+SIMULATORS = {
+    "sawyer": "MuJoCo, in a scene composed from robosuite's Sawyer, gripper and table models",
+    "fetch": "MuJoCo, through gymnasium-robotics' Fetch environment",
+    "reacher": "MuJoCo, through gymnasium's Reacher-v5 environment",
+}
+# RecordConfig fields that do not change what is recorded (left out of the card's command).
+_NOT_IN_COMMAND = (
+    "env", "repo_id", "root", "resume", "num_episodes", "image_writer_threads", "push_to_hub", "private", "tags",
+    "license", "device",
+)  # fmt: skip
+
+
+def _arg(name: str, value) -> str:
+    text = json.dumps(value) if isinstance(value, list | bool) or value is None else str(value)
+    return shlex.quote(f"--{name}={text}")
+
+
+def env_args(env: EnvConfig) -> list[str]:
+    """``--env.type`` and every ``--env.*`` field that differs from the default of its config."""
+    settings, defaults = _flatten(env_settings(env)), _flatten(env_settings(type(env)()))
+    args = [_arg("env.type", settings.pop("type"))]
+    return args + [_arg(f"env.{k}", v) for k, v in settings.items() if v != defaults.get(k, object())]
+
+
+def record_command(cfg: RecordConfig, num_episodes: int) -> str:
+    """The ``lerobot-indicator-record`` command that records such a dataset in one run: every env field
+    and recorder setting that differs from its default."""
+    args = env_args(cfg.env)
+    given, default = asdict(cfg), asdict(RecordConfig(env=cfg.env, repo_id=cfg.repo_id))
+    args += [_arg(k, v) for k, v in given.items() if k not in _NOT_IN_COMMAND and v != default[k]]
+    args += [_arg("num_episodes", num_episodes), _arg("repo_id", cfg.repo_id)]
+    return "lerobot-indicator-record " + " ".join(args)
+
+
+def _sensors(features: dict, env: dict) -> list[str]:
+    """One line per recorded observation (not the goal copies): what kind of sensor and its size."""
+    lines = []
+    camera = env.get("camera") or {}
+    depth_range = (
+        f", valid {camera['depth_min_m']}-{camera['depth_max_m']} m, 0 = no reading"
+        if "depth_min_m" in camera
+        else ""
+    )
+    for key, ft in features.items():
+        if not key.startswith("observation.") or is_goal_key(key):
+            continue
+        shape = "x".join(str(n) for n in ft["shape"])
+        if ft["dtype"] in ("image", "video") and (ft.get("info") or {}).get("is_depth_map", False):
+            kind = f"simulated depth camera, {shape} uint16 millimetres{depth_range}"
+        elif ft["dtype"] in ("image", "video"):
+            kind = f"simulated RGB camera, {shape} uint8"
+        elif is_ground_truth_key(key):
+            kind = f"ground truth from the simulator ({shape}), for evaluation only, never a policy input"
+        else:
+            names = ft.get("names") or []
+            shown = ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
+            kind = f"float32 vector ({shape}: {shown})"
+        lines.append(f"- `{key}`: {kind}")
+    return lines
+
+
+def dataset_card(dataset: LeRobotDataset, cfg: RecordConfig, command: str) -> dict[str, str]:
+    """LeRobot's dataset card fields (``push_to_hub``'s card keywords): description, paper, citation."""
+    env = recording_settings(cfg)["env"]
+    robot = dataset.meta.robot_type
+    simulator = SIMULATORS.get(robot, "MuJoCo")
+    goal_keys = [k for k in dataset.meta.features if is_goal_key(k)]
+    final_frame = (
+        f"its action repeats the previous one (LeRobot's padding) and `{ACTION_IS_PAD}` is true on it alone"
+        if ACTION_IS_PAD in dataset.meta.features
+        else "its action is padding (zeros or a repeat of the previous action), with no marker"
+    )
+    description = "\n".join(
+        [
+            f"Goal-conditioned episodes of the **{cfg.env.type}** task (robot: {robot}), **simulated** with "
+            f"{simulator}, for *Reinforcement Learning without Ground-Truth State* (Lin, Baweja, Held, CoRL "
+            "2019). Every frame also holds the episode's goal observation "
+            f"({', '.join(f'`{k}`' for k in goal_keys)}), rendered in the goal configuration.",
+            "",
+            f"Recorded with (policy: `{cfg.policy}`, seed {cfg.seed}):",
+            "",
+            f"```bash\n{command}\n```",
+            "",
+            "Sensors (per frame):",
+            "",
+            *_sensors(dataset.meta.features, env),
+            "",
+            f"`next.reward` is the indicator reward ({cfg.r_pos} iff the next observation equals the goal "
+            f"observation bit for bit on {cfg.reward_keys}, else {cfg.r_neg}). An episode of T steps has T + 1 "
+            f"frames: the last holds the final observation o_T, which no action follows; {final_frame}.",
+            "",
+            "Env config:",
+            "",
+            f"```yaml\n{yaml.safe_dump(env, sort_keys=False)}```",
+        ]
+    )
+    return {"dataset_description": description, "paper": PAPER, "citation_bibtex": CITATION_BIBTEX}
+
+
+def push_dataset(dataset: LeRobotDataset, cfg: RecordConfig, tags: list[str], command: str) -> None:
+    """``LeRobotDataset.push_to_hub`` with this project's tags and dataset card."""
+    dataset.push_to_hub(
+        tags=list(dict.fromkeys(["lerobot-indicator", "indicator-rewards", cfg.env.type, *tags])),
+        license=cfg.license,
+        private=cfg.private,
+        **dataset_card(dataset, cfg, command),
     )
 
 
@@ -347,8 +486,9 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
         with _StopSignals() as stop:
             obs, info = vec_env.reset(seed=cfg.seed)
             features = dataset_features(
-                vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), cfg.use_videos
-            )
+                vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), cfg.use_videos,
+                env_feature_names(vec_env),
+            )  # fmt: skip
             cfg.reward_keys = cfg.reward_keys or default_reward_keys(features)
             unknown = [k for k in cfg.reward_keys if k not in features or goal_key(k) not in features]
             if unknown:
@@ -363,7 +503,9 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
                 raise ValueError(
                     f"policy {cfg.policy!r} gives actions of shape {dry.shape}, env expects {vec_env.action_space.shape}"
                 )
-            session = open_recording(cfg, features, _episode_length(vec_env, cfg.env))
+            session = open_recording(
+                cfg, features, _episode_length(vec_env, cfg.env), env_robot_type(vec_env)
+            )
             target = session.total_episodes + cfg.num_episodes
             clean = False
             try:
@@ -384,12 +526,7 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
         vec_env.close()
     dataset = session.committed_dataset()
     if cfg.push_to_hub:
-        dataset.push_to_hub(
-            tags=["lerobot-indicator", "indicator-rewards", cfg.env.type, *cfg.tags],
-            license=cfg.license,
-            private=cfg.private,
-            dataset_description=_dataset_card(cfg),
-        )
+        push_dataset(dataset, cfg, cfg.tags, record_command(cfg, dataset.meta.total_episodes))
     return dataset
 
 
@@ -479,6 +616,11 @@ def write_episode(
         k: torch.from_numpy(np.require(frames[0][goal_key(k)], requirements="CW"))[None] for k in reward_keys
     }
     horizon = len(actions)
+    marked = ACTION_IS_PAD in dataset.features  # a dataset without the marker is continued without it
+
+    def pad(value: bool) -> dict[str, np.ndarray]:
+        return {ACTION_IS_PAD: np.array([value])} if marked else {}
+
     for t, action in enumerate(actions):
         reached = {
             k: torch.from_numpy(np.require(frames[t + 1][k], requirements="CW"))[None] for k in reward_keys
@@ -491,17 +633,18 @@ def write_episode(
                 REWARD: np.array([reward], dtype=np.float32),
                 DONE: np.array([t == horizon - 1], dtype=bool),
                 "task": task,
+                **pad(False),
             }
         )
     # The final observation o_T as its own frame (see the module docstring).
-    final_action = np.zeros_like(np.asarray(actions[0], dtype=np.float32))
     dataset.add_frame(
         {
             **frames[-1],
-            ACTION: final_action,
+            ACTION: np.asarray(actions[-1], dtype=np.float32),
             REWARD: np.zeros(1, dtype=np.float32),
             DONE: np.ones(1, dtype=bool),
             "task": task,
+            **pad(True),
         }
     )
     return horizon + 1
@@ -548,7 +691,7 @@ def interrupted_message(cfg: RecordConfig, exc: KeyboardInterrupt) -> str:
 
 
 @parser.wrap()
-def main(cfg: RecordConfig) -> None:
+def record_main(cfg: RecordConfig) -> None:
     init_logging()
     logging.info("record config:\n%s", json.dumps(asdict(cfg), default=str, indent=2))
     try:
@@ -565,6 +708,19 @@ def main(cfg: RecordConfig) -> None:
         dataset.meta.total_episodes,
         dataset.meta.total_frames,
     )
+
+
+def main() -> None:
+    """``lerobot-indicator-record``. A bad option or config file is one line: draccus turns a config
+    dataclass's ValueError into "Couldn't instantiate class ..." with tracebacks (io_errors.config_error_line)."""
+    try:
+        record_main()
+    except Exception as exc:
+        line = report_line(exc)
+        if line is None:
+            raise
+        print(line, file=sys.stderr, flush=True)
+        raise SystemExit(1) from None
 
 
 if __name__ == "__main__":

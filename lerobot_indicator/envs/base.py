@@ -68,6 +68,12 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
     state_dim: int = 3
     # Geom groups the task camera draws (sites are never drawn).
     render_geom_groups: tuple[int, ...] = (RENDER_GROUP,)
+    # The robot a recorded dataset names in its meta/info.json (``robot_type``).
+    robot_type: str = "sawyer"
+    # Per-dimension names of agent_pos, of the ground-truth achieved goal and of the action (dataset ``names``).
+    state_names: tuple[str, ...] = ("x", "y", "z")
+    achieved_goal_names: tuple[str, ...] = ("x", "y", "z")
+    action_names: tuple[str, ...] = ("delta_x", "delta_y", "delta_z")
 
     def __init__(
         self,
@@ -284,6 +290,17 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             GT_DESIRED_GOAL: self._desired_goal.astype(np.float32),
             GT_DISTANCE: np.float32(distance),
             "is_success": bool(distance <= self.epsilon),
+        }
+
+    def feature_names(self) -> dict[str, list[str]]:
+        """Per-dimension names of the vector observations, the ground truth and the action, by env key (the
+        recorder's dataset ``names``; a ``goal_<key>`` takes the names of ``<key>``)."""
+        return {
+            "agent_pos": list(self.state_names),
+            GT_ACHIEVED_GOAL: list(self.achieved_goal_names),
+            GT_DESIRED_GOAL: list(self.achieved_goal_names),
+            GT_DISTANCE: ["distance"],
+            "action": list(self.action_names),
         }
 
     def render(self) -> np.ndarray:

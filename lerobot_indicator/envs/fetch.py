@@ -18,7 +18,8 @@ rest), the arm stays where it starts.
 Observations (besides the shared camera keys): ``agent_pos`` = the compared state, the paper's 3-d goal
 space: the gripper's grip point xyz (FetchReach) or the block's centre xyz (FetchPush); ``goal_state`` = the
 same in the goal configuration; with ``obs_type="state"`` also ``environment_state`` = the wrapped env's
-``observation`` vector (10 / 25; it holds no goal). ``info``: ``gt_achieved_goal`` / ``gt_desired_goal`` =
+``observation`` vector (10 / 25; it holds no goal): never compared, the policy's default context input
+(FetchPush's gripper, which the compared block position does not show). ``info``: ``gt_achieved_goal`` / ``gt_desired_goal`` =
 ``agent_pos`` / ``goal_state`` in float64 before the cast, ``gt_distance`` their distance, ``is_success`` =
 ``gt_distance <= epsilon`` (0.05 m, the paper's table).
 """
@@ -46,8 +47,23 @@ SETTLE_TOL_M = 1e-4  # the goal configuration is reached when a step moves the g
 MAX_SETTLE_STEPS = 200
 
 
+def _xyz(prefix: str) -> tuple[str, ...]:
+    return tuple(f"{prefix}_{axis}" for axis in "xyz")
+
+
+# gymnasium-robotics' Fetch ``observation`` (fetch_env.py), in its order; the object parts are empty for FetchReach.
+FINGERS_POS, FINGERS_VEL = ("right_finger_pos", "left_finger_pos"), ("right_finger_vel", "left_finger_vel")
+FETCH_REACH_STATE_NAMES = (*_xyz("grip"), *FINGERS_POS, *_xyz("grip_vel"), *FINGERS_VEL)
+FETCH_PUSH_STATE_NAMES = (
+    *_xyz("grip"), *_xyz("object"), *_xyz("object_rel"), *FINGERS_POS, *_xyz("object_rot"),
+    *_xyz("object_vel"), *_xyz("object_angvel"), *_xyz("grip_vel"), *FINGERS_VEL,
+)  # fmt: skip
+
+
 class FetchEnv(GymGoalEnv):
     """Fetch tasks: markers, camera and the wrapped env's observation as ``environment_state``."""
+
+    robot_type = "fetch"
 
     marker_bodies = (MOCAP_BODY,)
     default_camera = FETCH_CAMERA
@@ -74,6 +90,7 @@ class FetchReachEnv(FetchEnv):
     state_dim = 3
     action_dim = 3
     env_state_dim = 10
+    environment_state_names = FETCH_REACH_STATE_NAMES
 
     def __init__(self, obs_type: str = "rgbd", epsilon: float = 0.05, **kwargs):
         """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, render_mode, episode_length, eval_reward)."""
@@ -107,6 +124,8 @@ class FetchPushEnv(FetchEnv):
     state_dim = 3
     action_dim = 4
     env_state_dim = 25
+    environment_state_names = FETCH_PUSH_STATE_NAMES
+    action_names = ("delta_x", "delta_y", "delta_z", "gripper")
 
     def __init__(self, obs_type: str = "state", epsilon: float = 0.05, **kwargs):
         """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, render_mode, episode_length, eval_reward)."""

@@ -10,7 +10,8 @@ geoms) are never drawn, in observations and goals alike: they would show the goa
 
 A task names the wrapped env and its markers and fills four hooks: ``_agent_state`` (the compared state),
 ``_achieved_goal`` (ground truth), ``_enter_goal_configuration`` and ``environment_state`` (the wrapped
-env's observation without its goal part).
+env's observation without its goal part, ``obs_type="state"`` only: no goal key, so never compared; the
+policy's default context input, docs/conventions.md).
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class GymGoalEnv(MujocoGoalEnv):
     wrapped_id: str
     action_dim: int
     env_state_dim: int
+    # Per-dimension names of ``environment_state`` (the wrapped env's observation vector, in its order).
+    environment_state_names: tuple[str, ...]
     marker_geoms: tuple[str, ...] = ()
     marker_bodies: tuple[str, ...] = ()
     default_camera: dict[str, Any] = {}
@@ -133,6 +136,10 @@ class GymGoalEnv(MujocoGoalEnv):
     def _apply_action(self, action) -> None:
         action = np.clip(np.asarray(action, dtype=np.float32).reshape(self.action_dim), -1.0, 1.0)
         self._inner_obs = self.inner.step(self._inner_action(action))[0]
+
+    def feature_names(self) -> dict[str, list[str]]:
+        names = super().feature_names()
+        return {**names, "environment_state": list(self.environment_state_names)}
 
     def _get_obs(self) -> dict[str, Any]:
         obs = super()._get_obs()

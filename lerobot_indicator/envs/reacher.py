@@ -9,7 +9,8 @@ red target sphere is never drawn.
 
 Observations (besides the shared camera keys): ``agent_pos`` = the fingertip xy (m), ``goal_state`` = the
 fingertip xy in the goal configuration (the paper's 2-d goal); with ``obs_type="state"`` also
-``environment_state`` = cos and sin of the two joint angles and their velocities (6). ``info``:
+``environment_state`` = cos and sin of the two joint angles and their velocities (6): never compared, the
+policy's default context input (a torque-driven arm's velocities). ``info``:
 ``gt_achieved_goal`` / ``gt_desired_goal`` = fingertip xy now / in the goal configuration, ``gt_distance``
 their distance, ``is_success`` = ``gt_distance <= epsilon`` (0.01 m, the paper's table).
 """
@@ -47,6 +48,12 @@ class ReacherEnv(GymGoalEnv):
     state_dim = 2
     action_dim = 2
     env_state_dim = 6
+    robot_type = "reacher"
+    state_names = achieved_goal_names = ("x", "y")
+    action_names = ("joint0_torque", "joint1_torque")
+    environment_state_names = (
+        "cos_joint0", "cos_joint1", "sin_joint0", "sin_joint1", "joint0_vel", "joint1_vel"
+    )  # fmt: skip
     marker_geoms = ("target",)
     default_camera = REACHER_CAMERA
 

@@ -34,7 +34,7 @@ from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.rope_cache import ARRAY_KEYS, cache_params, generate_pair, load_cache
 from lerobot_indicator.envs.rope_scene import RopeGeometry, build_rope_model, check_pusher_rest
 from lerobot_indicator.envs.rope_sim import PushConfig, RopeSim
-from lerobot_indicator.keys import GOAL_PREFIX
+from lerobot_indicator.keys import GOAL_PREFIX, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL
 
 TASK_DESCRIPTION = "Push the rope into the configuration shown in the goal image."
 TABLE_TOP_Z = RopeGeometry().table_top_z
@@ -79,6 +79,7 @@ class RopePushEnv(MujocoGoalEnv):
     task = "rope_push"
     task_description = TASK_DESCRIPTION
     state_dim = 45
+    action_names = ("push_start_x", "push_start_y", "push_end_x", "push_end_y")
 
     def __init__(
         self,
@@ -172,6 +173,14 @@ class RopePushEnv(MujocoGoalEnv):
         resting = self.data.mocap_pos[self.sim.mocap_id, :2].copy()
         ran = self.sim.push(action)  # an undone push parks the pusher with the restored state
         self._rest_pusher_at(self.push_end(action) if ran else resting)
+
+    def feature_names(self) -> dict[str, list[str]]:
+        """Link centres as ``link<i>_x``, ``link<i>_y`` (, ``link<i>_z`` in the state), link 0 at one end."""
+        links = range(self.push_config.geometry.n_links)
+        xy = [f"link{i}_{axis}" for i in links for axis in "xy"]
+        xyz = [f"link{i}_{axis}" for i in links for axis in "xyz"]
+        names = super().feature_names()
+        return {**names, "agent_pos": xyz, ROPE_XY: xy, GT_ACHIEVED_GOAL: xy, GT_DESIRED_GOAL: xy}
 
     @property
     def goal_push_actions(self) -> np.ndarray:

@@ -5,6 +5,7 @@ One line per field here; why each default is what it is, and the measurements be
 """
 
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,7 +16,7 @@ from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTr
 from lerobot.optim import AdamConfig, OptimizerConfig
 from lerobot.utils.constants import ACTION
 
-from lerobot_indicator.keys import goal_key, is_goal_key, is_ground_truth_key
+from lerobot_indicator.keys import OBS_PREFIX, goal_key, is_goal_key, is_ground_truth_key
 
 # "ae" / "vae": the paper's learned-reward baselines (policy/learned_reward.py).
 LEARNED_REWARDS = ("ae", "vae")
@@ -41,8 +42,25 @@ ENCODER_PRESETS = {
 IMAGE_ENCODERS = tuple(ENCODER_PRESETS)
 CONV_PRECISIONS = ("auto", "float32", "bfloat16")
 CRITIC_OUTPUT_SCALES = ("paper", "return")
+# Per preset: the values of n_step, inverse_dynamics and critic_output_scale left at None (docs/policy.md,
+# "Presets"). "paper": the paper's one-step target, no inverse-dynamics loss, Q straight from the MLP. "auto": the
+# settings measured to learn, filled in once the inputs are known (validate_features): the paper's on state
+# (the return-scaled output regresses state reach, docs/results/experiments/return_scale/), AUTO_IMAGES with
+# an image among the compared keys (docs/results/experiments_rgbd/defaults/).
+PRESETS = {
+    "auto": {"n_step": 1, "inverse_dynamics": 0.0, "critic_output_scale": "paper"},
+    "paper": {"n_step": 1, "inverse_dynamics": 0.0, "critic_output_scale": "paper"},
+}
+# "auto" with an image among the compared keys: a 3-step target, the return-scaled critic output (no seed's
+# critic saturates) and, with the shared "drq" encoder, the inverse-dynamics loss. lerobot-train keeps
+# n_step=1: its samples hold no frames between o_{t+1} and the future.
+AUTO_IMAGES = {"n_step": 3, "inverse_dynamics": 1.0, "critic_output_scale": "return"}
+PRESET_FIELDS = tuple(PRESETS["paper"])
+# A delta index past any episode's end: LeRobot clamps it to the episode's last frame.
+EPISODE_END_OFFSET = 1_000_000
 # The allowed values of each choice field, checked in this order.
 CHOICES = {
+    "preset": tuple(PRESETS),
     "reward": REWARD_MODES,
     "filter_q": FILTER_Q_SOURCES,
     "filter_start": FILTER_STARTS,
@@ -77,12 +95,18 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     """Goal-conditioned DDPG trained with indicator rewards, hindsight relabeling, balancing and filtering.
 
     ``observation_keys`` are the *compared* keys: the reward is R+ only when every one of them equals its goal
-    (``keys.goal_key``) bit for bit. The networks see exactly these keys and their goals.
+    (``keys.goal_key``) bit for bit. The networks see these keys, their goals and the ``context_keys``: states
+    of o_t (and of the frame a TD target bootstraps from) that are never compared, relabeled or in a goal.
     """
+
+    # Defaults of n_step, inverse_dynamics and critic_output_scale: "auto" (what learned) or "paper" (PRESETS).
+    preset: str = "auto"
 
     # Inputs and horizon
     # Compared keys (goals: goal_key(k)); None = the data's camera keys with a goal, else its state keys.
     observation_keys: list[str] | None = None
+    # Uncompared state inputs (no goal, never relabeled); None = goal-less states if no image is compared.
+    context_keys: list[str] | None = None
     # Episode horizon T (gamma = (T-1)/T, q0 follow); None = the dataset's or env's episode length.
     horizon: int | None = None
     # lerobot-train fetches o_{t+k} for each of these offsets k (all >= 2) as candidate future goals.
@@ -91,6 +115,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     input_clip: float = 5.0
     # lerobot-train's sampler skips each episode's last frame, which has no o_{t+1}.
     drop_n_last_frames: int = 1
+    # lerobot-train fetches each episode's last frame, the stand-in goal of data without goals; None = auto.
+    episode_end_goal: bool | None = None
+    # Deployment: a directory holding one goal per compared key (save_goal), added to observations without one.
+    goal_path: str | None = None
 
     # Reward
     # "indicator" (the paper's), "oracle" (ground-truth distance <= oracle_epsilon), or learned "ae" / "vae".
@@ -127,8 +155,8 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     # Critic output
     # Initial Q (the critic's output bias); None = R-/(1-gamma), the lowest return.
     q_init: float | None = None
-    # "paper" (the MLP outputs Q) or "return" (it outputs (1-gamma) Q, scaled by 1/(1-gamma)).
-    critic_output_scale: str = "paper"
+    # "paper" (the MLP outputs Q) or "return" ((1-gamma) Q, scaled by 1/(1-gamma)); None = the preset's.
+    critic_output_scale: str | None = None
 
     # Networks (paper appendix)
     # Hidden layers of the actor's and critic's MLPs (tanh).
@@ -147,8 +175,8 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     augment_pad: int | None = None
     # Conv precision: "float32", "bfloat16", or "auto" (bfloat16 where the device computes it natively).
     conv_precision: str = "auto"
-    # "drq": weight of the self-supervised inverse-dynamics loss on the shared encoder (0 = off).
-    inverse_dynamics: float = 0.0
+    # "drq": weight of the self-supervised inverse-dynamics loss on the encoder (0 = off); None = the preset's.
+    inverse_dynamics: float | None = None
     # "drq": the target critic keeps its own EMA copy of the encoder (SAC-AE / CURL) instead of sharing it.
     target_encoder: bool = False
     # A spatial softmax (LeRobot's SpatialSoftmax) after the convs (RopePush).
@@ -167,8 +195,8 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     learned_reward_positive: float | None = None
 
     # DDPG
-    # n-step TD target (1 = the paper's one-step target); online trainer only.
-    n_step: int = 1
+    # n-step TD target (1 = the paper's one-step target; online trainer only); None = the preset's.
+    n_step: int | None = None
     # Target networks: target <- tau * target + (1 - tau) * online.
     tau: float = 0.98
     # Weight of the penalty on the squared actor output (baselines' HER).
@@ -223,10 +251,13 @@ class IndicatorDDPGConfig(PreTrainedConfig):
                     f"observation_keys: {key!r} is a goal key; list the observation key it is the goal of instead"
                 )
             goal_key(key)  # raises on keys outside observation.*
+        self._check_context_keys()
         if self.horizon is not None:
             self.set_horizon(self.horizon)
+        if self.preset == "paper":  # "auto" waits for the inputs
+            self._fill_from_preset(PRESET_FIELDS)
         for name, choices in CHOICES.items():
-            if getattr(self, name) not in choices:
+            if getattr(self, name) is not None and getattr(self, name) not in choices:
                 raise ValueError(f"{name} must be one of {choices}, got {getattr(self, name)!r}")
         for name, value in ENCODER_PRESETS[self.image_encoder].items():
             if getattr(self, name) is None:
@@ -239,10 +270,14 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             ("hidden_dims", len(self.hidden_dims) > 0, "non-empty"),
             ("conv_channels", len(self.conv_channels) > 0, "non-empty"),
             ("augment_pad", self.augment_pad >= 0, ">= 0 pixels"),
-            ("inverse_dynamics", self.inverse_dynamics >= 0, ">= 0 (0 = off)"),
+            (
+                "inverse_dynamics",
+                self.inverse_dynamics is None or self.inverse_dynamics >= 0,
+                ">= 0 (0 = off)",
+            ),
             ("reward_conv_channels", len(self.reward_conv_channels) > 0, "non-empty"),
             ("reward_latent_dim", self.reward_latent_dim >= 1, ">= 1"),
-            ("n_step", self.n_step >= 1, ">= 1 (1 = the paper's one-step TD target)"),
+            ("n_step", self.n_step is None or self.n_step >= 1, ">= 1 (1 = the paper's one-step TD target)"),
             ("tau", 0 <= self.tau <= 1, "in [0, 1]"),
         ):
             if not ok:
@@ -258,7 +293,7 @@ class IndicatorDDPGConfig(PreTrainedConfig):
                 f"filter=True drops R- transitions, but reward={self.reward!r} gives a continuous reward with no "
                 "R-: pass --policy.filter=false"
             )
-        if self.inverse_dynamics > 0 and self.image_encoder != "drq":
+        if (self.inverse_dynamics or 0) > 0 and self.image_encoder != "drq":
             raise ValueError(
                 f"inverse_dynamics={self.inverse_dynamics} trains the shared image encoder, which "
                 f"image_encoder={self.image_encoder!r} does not have: use image_encoder=drq or inverse_dynamics=0"
@@ -268,6 +303,45 @@ class IndicatorDDPGConfig(PreTrainedConfig):
                 f"conv_strides has {len(self.conv_strides)} entries but conv_channels has "
                 f"{len(self.conv_channels)}: give one stride per conv layer"
             )
+
+    def _check_context_keys(self) -> None:
+        """Context keys: observation keys, never ground truth or goals, each named once, never compared."""
+        seen: set[str] = set()
+        for key in self.context_keys or []:
+            if is_ground_truth_key(key):
+                raise ValueError(
+                    f"context_keys: {key!r} is a ground-truth key: it is for evaluation and the oracle "
+                    "baseline only and can never be a policy input (see docs/conventions.md)"
+                )
+            if is_goal_key(key):
+                raise ValueError(
+                    f"context_keys: {key!r} is a goal key; a goal never carries context: list observation keys"
+                )
+            goal_key(key)  # raises on keys outside observation.*
+            if key in (self.observation_keys or []):
+                raise ValueError(
+                    f"context_keys: {key!r} is also in observation_keys; a key is either compared or context"
+                )
+            if key in seen:
+                raise ValueError(f"context_keys: {key!r} is listed twice")
+            seen.add(key)
+
+    def _fill_from_preset(self, names: Iterable[str], images: bool = False) -> None:
+        """Set each of ``names`` left at None to ``preset``'s value for these inputs; a given value stays."""
+        values = preset_values(self.preset, images, self.image_encoder, self.trains_on_dataset_samples)
+        for name in names:
+            if getattr(self, name) is None:
+                setattr(self, name, values[name])
+
+    def set_dataset_feature_metadata(self, dataset_features: dict[str, Any]) -> None:
+        """Called by LeRobot's ``make_policy`` when it makes the policy for a dataset, as ``lerobot-train``
+        does: the policy then trains on ``lerobot-train`` samples, which allow no n-step target."""
+        self._dataset_samples = True
+
+    @property
+    def trains_on_dataset_samples(self) -> bool:
+        """Whether the policy was made for a dataset's ``lerobot-train`` samples (not an attribute draccus saves)."""
+        return getattr(self, "_dataset_samples", False)
 
     def set_horizon(self, horizon: int, source: str | None = None) -> None:
         """Set T from the data (``source`` names where it comes from); a different given value is an error."""
@@ -361,9 +435,13 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         then keep only those as inputs.
 
         ``make_policy`` fills ``input_features`` with every ``observation.*`` feature of the dataset (ground
-        truth included); the networks use exactly the compared keys and their goals.
+        truth included); the networks use exactly the compared keys, their goals and the context keys.
         """
         features = self.input_features or {}
+        if not any(is_goal_key(k) for k in features):
+            features = self._episode_end_goal_features(features)
+        elif self.episode_end_goal is None:
+            self.episode_end_goal = False  # saved: a resumed lerobot-train fetches the same frames
         cameras = default_observation_keys(features, FeatureType.VISUAL)
         if self.observation_keys is None:
             self.observation_keys = cameras or default_observation_keys(features, None)
@@ -409,13 +487,86 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(
                 f"output features must contain {ACTION!r}, got {list(self.output_features or {})}"
             )
+        self._fill_from_preset(PRESET_FIELDS, images=bool(visual))
+        logging.info("%s", self.preset_summary(bool(visual)))
         if self.inverse_dynamics > 0 and not visual:
             raise ValueError(
                 f"inverse_dynamics={self.inverse_dynamics} trains the shared image encoder, and the observation "
                 f"keys {self.observation_keys} hold no image: use inverse_dynamics=0"
             )
-        keep = self.observation_keys + self.goal_keys
+        self._validate_context_features(features, visual)
+        keep = self.observation_keys + self.goal_keys + self.context_keys
         self.input_features = {k: features[k] for k in keep}
+
+    def _episode_end_goal_features(self, features: dict[str, PolicyFeature]) -> dict[str, PolicyFeature]:
+        """Data without goal columns: choose the compared keys (cameras, else the state keys) and give each a
+        goal feature of its own shape. Every relabeled goal is a later frame of the same episode; where the
+        method keeps the recorded goal, the episode's last frame stands in for it."""
+        observed = [k for k in features if k.startswith(OBS_PREFIX) and not is_ground_truth_key(k)]
+        if self.observation_keys is None:
+            cameras = [k for k in observed if features[k].type is FeatureType.VISUAL]
+            self.observation_keys = cameras or [
+                k for k in observed if features[k].type is not FeatureType.VISUAL
+            ]
+            if not self.observation_keys:
+                raise ValueError(
+                    f"no observation key among the input features {sorted(features)}: nothing to compare"
+                )
+        if self.episode_end_goal is False:
+            raise ValueError(
+                f"the data has no goal column ({goal_key(self.observation_keys[0])!r} form) and "
+                "episode_end_goal=false: pass --policy.episode_end_goal=true (the episode's last frame stands in "
+                "for the recorded goal)"
+            )
+        self.episode_end_goal = True
+        logging.info(
+            "indicator_ddpg: the data has no goal columns: compares %s (not %s; --policy.context_keys conditions "
+            "on a state without comparing it), relabels goals with later frames of the same episode, and uses "
+            "each episode's last frame where the method keeps the recorded goal",
+            self.observation_keys,
+            [k for k in observed if k not in self.observation_keys],
+        )
+        return {**features, **{goal_key(k): features[k] for k in self.observation_keys if k in features}}
+
+    def _validate_context_features(self, features: dict[str, PolicyFeature], visual: list[str]) -> None:
+        """Choose (when not given: the goal-less state keys, unless an image is compared, as in the paper's
+        visual tasks) and check the context keys against the input features."""
+        if self.context_keys is None:
+            self.context_keys = [] if visual else default_context_keys(features, self.observation_keys)
+            if self.context_keys:
+                logging.info("indicator_ddpg also conditions on the context %s", self.context_keys)
+        self._check_context_keys()
+        for key in self.context_keys:
+            if key not in features:
+                raise ValueError(f"context key {key!r} is missing from the input features {sorted(features)}")
+            if features[key].type is FeatureType.VISUAL:
+                raise ValueError(
+                    f"context key {key!r} is an image: context inputs are state vectors; compare it "
+                    "(observation_keys) or leave it out"
+                )
+
+    def preset_summary(self, images: bool) -> str:
+        """The start-up line naming the preset and the n_step, inverse_dynamics and critic_output_scale in use."""
+        inputs = "images" if images else "state"
+        note = ""
+        if images and self.trains_on_dataset_samples:
+            inputs += ", lerobot-train samples"
+            if self.preset == "auto":
+                note = (
+                    " (a lerobot-train sample holds no frames between o_{t+1} and the future ones, so no "
+                    "3-step target: lerobot-indicator-train uses n_step=3)"
+                )
+        if self.preset == "paper":
+            other = "--policy.preset=auto for the settings measured to learn"
+        elif images:
+            other = "--policy.preset=paper for the paper's one-step settings"
+        else:
+            other = "the paper's settings"
+        return (
+            f"indicator_ddpg preset={self.preset} ({inputs}): n_step={self.n_step}, "
+            f"inverse_dynamics={self.inverse_dynamics}, critic_output_scale={self.critic_output_scale}{note}; "
+            f"{other}"
+        )
 
     @property
     def shared_encoder(self) -> bool:
@@ -435,10 +586,19 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         feature: PolicyFeature = self.output_features[ACTION]
         return int(feature.shape[0])
 
-    # lerobot-train dataset access: index 0 = o_t, 1 = o_{t+1}, then the future offsets.
+    # lerobot-train dataset access: index 0 = o_t, 1 = o_{t+1}, then the future offsets, then (when fetched)
+    # EPISODE_END_OFFSET, which LeRobot clamps to the episode's last frame (and flags in ``<key>_is_pad``).
     @property
     def observation_delta_indices(self) -> list[int]:
-        return [0, 1, *self.future_offsets]
+        return [0, 1, *self.future_offsets, *([EPISODE_END_OFFSET] if self.fetches_episode_end else [])]
+
+    @property
+    def fetches_episode_end(self) -> bool:
+        """Whether lerobot-train fetches each episode's last frame: ``episode_end_goal``, or when unset, while
+        the data's features are unknown (a fresh lerobot-train chooses the frames before it reads them)."""
+        if self.episode_end_goal is not None:
+            return self.episode_end_goal
+        return not any(is_goal_key(k) for k in self.input_features or {})
 
     @property
     def action_delta_indices(self) -> None:
@@ -480,3 +640,30 @@ def default_observation_keys(features: dict[str, PolicyFeature], kind: FeatureTy
         and goal_key(k) in features
         and ((ft.type is kind) if kind is not None else ft.type is not FeatureType.VISUAL)
     ]
+
+
+def default_context_keys(features: dict[str, PolicyFeature], compared: list[str]) -> list[str]:
+    """State (non-image) observation keys without a goal that are not compared, never ground truth or goals:
+    e.g. the wrapped gymnasium tasks' ``observation.environment_state``."""
+    return [
+        k
+        for k, ft in features.items()
+        if k.startswith("observation.")
+        and k not in compared
+        and not is_goal_key(k)
+        and not is_ground_truth_key(k)
+        and goal_key(k) not in features
+        and ft.type is not FeatureType.VISUAL
+    ]
+
+
+def preset_values(preset: str, images: bool, image_encoder: str, dataset_samples: bool) -> dict[str, Any]:
+    """The values ``preset`` gives the PRESET_FIELDS for inputs with or without ``images``, trained on
+    ``lerobot-train``'s ``dataset_samples`` or by the online trainer."""
+    values = dict(PRESETS[preset])
+    if preset == "auto" and images:
+        values["n_step"] = 1 if dataset_samples else AUTO_IMAGES["n_step"]
+        values["critic_output_scale"] = AUTO_IMAGES["critic_output_scale"]
+        # The inverse-dynamics loss trains the one encoder actor and critic share, which only "drq" has.
+        values["inverse_dynamics"] = AUTO_IMAGES["inverse_dynamics"] if image_encoder == "drq" else 0.0
+    return values

@@ -90,24 +90,27 @@ def encode_distinct_frames(
 ) -> Features:
     """``indicator_core.encode_plain``'s features, each distinct frame encoded once per encoder (module
     docstring). With the shared encoder the targets use the online encoder's features of (o_{t+1}, g)
-    without gradients, or their own EMA encoder's (``target_encoder``)."""
+    without gradients, or their own EMA encoder's (``target_encoder``). The context keys of o_t and of
+    ``next_obs`` are appended to their features (``ObservationEncoder.join``); a goal has none."""
     dedupe = bool(config.image_keys) and not torch.compiler.is_compiling()
     frames = BootstrapFrames(next_obs, goal, goal_is_next, shift, dedupe)
     target_obs = config.filter and config.filter_q == "target"
 
     def target_critic_features() -> tuple[Tensor, Tensor | None]:
         """The target critic's (o_{t+1}, g) and, for the filter, (o_t, g), from its own encoder."""
+        encoder = target_critic.encoder
         with torch.no_grad():
-            *h_obs, h_next, h_goal = frames.encode(target_critic.encoder, [obs] if target_obs else [])
-        return torch.cat([h_next, h_goal], 1), torch.cat([h_obs[0], h_goal], 1) if target_obs else None
+            *h_obs, h_next, h_goal = frames.encode(encoder, [obs] if target_obs else [])
+            target_o = encoder.join(h_obs[0], h_goal, obs) if target_obs else None
+            return encoder.join(h_next, h_goal, next_obs), target_o
 
     if config.shared_encoder:
         extra = [] if transition_next is None else [transition_next]
         # o_{t+1} trains the encoder only through the inverse-dynamics loss of a one-step target.
         next_needs_grad = critic.inverse is not None and transition_next is None
         h_obs, *h_extra, h_next, h_goal = frames.encode(critic.encoder, [obs, *extra], next_needs_grad)
-        features = torch.cat([h_obs, h_goal], dim=1)
-        target = torch.cat([h_next, h_goal], dim=1).detach()
+        features = critic.encoder.join(h_obs, h_goal, obs)
+        target = critic.encoder.join(h_next, h_goal, next_obs).detach()
         target_o = features.detach() if target_obs else None
         if config.target_encoder:
             target, target_o = target_critic_features()
@@ -121,7 +124,7 @@ def encode_distinct_frames(
         )
     target_c, target_o = target_critic_features()
     with torch.no_grad():
-        target_a = torch.cat(frames.encode(target_actor.encoder, []), dim=1)
+        target_a = target_actor.encoder.join(*frames.encode(target_actor.encoder, []), next_obs)
     return Features(
         critic=critic.encode(obs, goal, shift),
         actor=actor.encode(obs, goal, shift),

@@ -21,7 +21,9 @@ the online trainer). It works on a *transition batch*: a flat dict with, for eve
 ``observation.gt_desired_goal`` (optional)   ground truth of the goal  } statistics
 ==========================================  ===========================================================
 
-Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
+Every context key ``c`` of ``config.context_keys`` comes as ``c`` (o_t's), ``next.c`` (o_{t+1}'s) and, for
+``n_step`` > 1, ``path.c``: network inputs beside the frame they belong to, never compared, relabeled or in a
+goal. Ground truth is never a network input: it only feeds the oracle reward and the logged reward statistics.
 """
 
 import math
@@ -245,7 +247,7 @@ def encode_plain(
         return Features(critic_f, actor_f, *targets, target_critic_obs=target_o)
 
     h_obs, h_goal = encode_frames(critic.encoder, [obs, goal], None if shift is None else [shift, shift])
-    features = torch.cat([h_obs, h_goal], dim=1)
+    features = critic.encoder.join(h_obs, h_goal, obs)
     target_net = target_critic if config.target_encoder else critic
     with torch.no_grad():
         target = target_net.encode(next_obs, goal, shift)
@@ -320,8 +322,10 @@ def indicator_ddpg_loss(
     ``torch.compile`` captures the whole function as one graph.
     """
     keys = config.observation_keys
-    obs = {k: batch[k] for k in keys}
-    next_obs = {k: batch[NEXT + k] for k in keys}
+    # The networks' inputs: the compared keys and the context keys (never compared, relabeled or in a goal).
+    inputs = keys + (config.context_keys or [])
+    obs = {k: batch[k] for k in inputs}
+    next_obs = {k: batch[NEXT + k] for k in inputs}
     action = batch[ACTION]
     batch_size = action.shape[0]
     has_future = batch[HAS_FUTURE].bool()
@@ -352,7 +356,7 @@ def indicator_ddpg_loss(
     reward = step_reward(next_obs, batch.get(GT_NEXT_ACHIEVED))  # r_{t+1}: the filter's and the stats'
     returns, discount, bootstrap_obs = reward, torch.full_like(reward, config.gamma), next_obs
     if config.n_step > 1:
-        returns, discount, bootstrap_obs = n_step_return(batch, keys, reward, step_reward, config)
+        returns, discount, bootstrap_obs = n_step_return(batch, inputs, reward, step_reward, config)
     # Where the goal is the frame the target bootstraps from, encode_once shares its encoding.
     goal_is_next = relabel.source == SOURCE_NEXT
     if config.n_step > 1:
@@ -478,7 +482,9 @@ def dataset_batch_to_transitions(
 
     With ``observation_delta_indices = [0, 1, *future_offsets]`` every ``observation.*`` key arrives as
     (B, 2 + n_offsets, ...) with ``<key>_is_pad`` (B, 2 + n_offsets) marking frames past the episode end.
-    Index 0 is o_t, 1 is o_{t+1}; the future frame is one *valid* offset picked uniformly per sample.
+    Index 0 is o_t, 1 is o_{t+1}; the future frame is one *valid* offset picked uniformly per sample. When the
+    config fetches the episode's end (``EPISODE_END_OFFSET``) one more frame follows: the episode's last frame,
+    which stands in for the recorded goal of data without goal columns.
     """
     if config.n_step > 1:
         raise ValueError(
@@ -489,14 +495,17 @@ def dataset_batch_to_transitions(
     first = config.observation_keys[0]
     pad_key = f"{first}_is_pad"
     n_frames = 2 + len(config.future_offsets)
-    if batch[first].dim() < 2 or batch[first].shape[1] != n_frames:
+    # A fresh lerobot-train fetches the episode's end before it knows whether the data has goal columns.
+    if batch[first].dim() < 2 or batch[first].shape[1] not in (n_frames, n_frames + 1):
         raise ValueError(
             f"{first!r} has shape {tuple(batch[first].shape)}: expected (B, {n_frames}, ...) from "
-            f"observation_delta_indices {config.observation_delta_indices}"
+            f"observation_delta_indices {config.observation_delta_indices}, or (B, {n_frames + 1}, ...) with "
+            "the episode's last frame"
         )
+    has_end = batch[first].shape[1] == n_frames + 1
     batch_size, device = batch[first].shape[0], batch[first].device
     if pad_key in batch:
-        is_pad = batch[pad_key].bool()
+        is_pad = batch[pad_key].bool()[:, :n_frames]
     else:
         is_pad = torch.zeros(batch_size, n_frames, dtype=torch.bool, device=device)
     future_ok = ~is_pad[:, 2:]
@@ -519,12 +528,27 @@ def dataset_batch_to_transitions(
         out[k] = batch[k][:, 0]
         out[NEXT + k] = batch[k][:, 1]
         out[FUTURE + k] = batch[k][rows, pick]
-        out[goal_key(k)] = batch[goal_key(k)][:, 0]
+        out[goal_key(k)] = episode_goal(batch, k, has_end)
+    for k in config.context_keys or []:
+        out[k], out[NEXT + k] = batch[k][:, 0], batch[k][:, 1]
     if OBS_GT_ACHIEVED_GOAL in batch and OBS_GT_DESIRED_GOAL in batch:
         out[GT_NEXT_ACHIEVED] = batch[OBS_GT_ACHIEVED_GOAL][:, 1]
         out[GT_FUTURE_ACHIEVED] = batch[OBS_GT_ACHIEVED_GOAL][rows, pick]
         out[GT_DESIRED] = batch[OBS_GT_DESIRED_GOAL][:, 0]
     return out
+
+
+def episode_goal(batch: dict[str, Tensor], key: str, has_end: bool) -> Tensor:
+    """The recorded goal of ``key``'s episode, (B, ...): its goal column, else the episode's last frame."""
+    gkey = goal_key(key)
+    if gkey in batch:
+        return batch[gkey][:, 0]
+    if not has_end:
+        raise ValueError(
+            f"the batch has no goal {gkey!r} and no episode-end frame of {key!r}: data without goal columns "
+            "needs --policy.episode_end_goal=true (the episode's last frame stands in for the recorded goal)"
+        )
+    return batch[key][:, -1]
 
 
 def is_transition_batch(batch: dict[str, Tensor], config: IndicatorDDPGConfig) -> bool:

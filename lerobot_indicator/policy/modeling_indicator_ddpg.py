@@ -10,12 +10,16 @@ import copy
 
 import torch
 from lerobot.policies.pretrained import PreTrainedPolicy
+from lerobot.utils.feature_utils import dataset_to_policy_features
 from torch import Tensor, nn
 
 from lerobot_indicator.finite import check_batch, check_loss
-from lerobot_indicator.keys import goal_key
+from lerobot_indicator.io_errors import reading
+from lerobot_indicator.keys import goal_key, is_goal_key
 from lerobot_indicator.policy import indicator_core
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
+from lerobot_indicator.policy.goal_observations import GoalObservations
+from lerobot_indicator.policy.input_checks import check_policy_inputs
 from lerobot_indicator.policy.learned_reward import LearnedReward
 from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
 
@@ -32,8 +36,17 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
     ):
         super().__init__(config)
         config.validate_features()
+        if dataset_meta is not None and getattr(dataset_meta, "features", None):
+            # A pretrained policy keeps its input features: the dataset must give them (lerobot-train).
+            check_policy_inputs(
+                config,
+                dataset_to_policy_features(dataset_meta.features),
+                f"dataset {dataset_meta.repo_id}",
+                with_goals=not getattr(config, "episode_end_goal", False),
+            )
         if dataset_meta is not None and getattr(dataset_meta, "episodes", None) is not None:
-            config.set_horizon(dataset_horizon(dataset_meta), source=f"dataset {dataset_meta.repo_id}")
+            horizon = dataset_horizon(dataset_meta, config.horizon)
+            config.set_horizon(horizon, source=f"dataset {dataset_meta.repo_id}")
         if config.horizon is None:
             raise ValueError(
                 "indicator_ddpg needs the episode horizon T: pass --policy.horizon, or make the policy for a "
@@ -54,6 +67,13 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
             # Static shapes: a second batch size (a last short batch, another policy in the same process)
             # recompiles instead of going symbolic, which torch.rand(size, generator=...) does not support.
             self._loss = torch.compile(self._loss, mode=config.compile_mode, dynamic=False)
+
+    @classmethod
+    def _load_as_safetensor(cls, model, model_file: str, map_location: str, strict: bool):
+        """LeRobot's loading of ``model.safetensors`` (``from_pretrained``); a truncated or corrupt file is one
+        line naming it."""
+        with reading(model_file, "policy weights", "save the policy again or use another checkpoint"):
+            return super()._load_as_safetensor(model, model_file, map_location, strict)
 
     def set_observation_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
         """Input normalisation of every network (online and target) from ``{key: {"mean", "std"}}``."""
@@ -102,14 +122,31 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         return loss, indicator_core.stats_to_floats(stats)
 
     def _split(self, batch: dict[str, Tensor]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
-        missing = [k for k in self.config.observation_keys + self.config.goal_keys if k not in batch]
+        """The observation (compared and context keys) and the goal (the compared keys' goals) of a batch."""
+        context = self.config.context_keys or []
+        inputs = self.config.observation_keys + self.config.goal_keys + context
+        missing = [k for k in inputs if k not in batch]
         if missing:
-            raise KeyError(f"batch lacks the policy inputs {missing} (has {sorted(batch)})")
-        for key in self.config.observation_keys + self.config.goal_keys:
+            hint = (
+                "; goals at deployment: --policy.goal_path (docs/own_data.md)"
+                if is_goal_key(missing[0])
+                else ""
+            )
+            raise KeyError(f"batch lacks the policy inputs {missing} (has {sorted(batch)}){hint}")
+        for key in inputs:
             check_input_shape(key, batch[key], tuple(self.config.input_features[key].shape))
-        obs = {k: batch[k] for k in self.config.observation_keys}
+        obs = {k: batch[k] for k in self.config.observation_keys + context}
         goal = {k: batch[goal_key(k)] for k in self.config.observation_keys}
         return obs, goal
+
+    def _with_goals(self, batch: dict[str, Tensor]) -> dict[str, Tensor]:
+        """The batch with ``--policy.goal_path``'s goals where it has none: LeRobot's robot CLIs (lerobot-rollout)
+        load the checkpoint's own pre-processor and deliver only the robot's observations."""
+        if self.config.goal_path is None or all(k in batch for k in self.config.goal_keys):
+            return batch
+        if getattr(self, "_goal_observations", None) is None:
+            self._goal_observations = GoalObservations(self.config.goal_path, self.config.observation_keys)
+        return self._goal_observations.add(batch)
 
     @torch.no_grad()
     def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
@@ -118,7 +155,7 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
     @torch.no_grad()
     def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
         """Deterministic pi(o, o_g), (B, A) in [-1, 1] (evaluation)."""
-        obs, goal = self._split(batch)
+        obs, goal = self._split(self._with_goals(batch))
         return self.actor(obs, goal)
 
     @torch.no_grad()
@@ -172,13 +209,14 @@ def check_input_shape(key: str, value: Tensor, feature_shape: tuple[int, ...]) -
     raise InputShapeError(f"{key}: expected shape {expected}, got {actual}{stacked}")
 
 
-def dataset_horizon(dataset_meta) -> int:
+def dataset_horizon(dataset_meta, given: int | None = None) -> int:
     """T of a recorded dataset: each episode holds o_0..o_T as T + 1 frames (docs/dataset_format.md), and
-    the indicator reward's gamma and q0 assume one fixed horizon."""
+    the indicator reward's gamma and q0 assume one fixed horizon. Episodes of several lengths (teleoperation)
+    take the ``given`` T (--policy.horizon) as the discount's time scale."""
     lengths = sorted(set(dataset_meta.episodes["length"]))
-    if len(lengths) != 1:
+    if len(lengths) != 1 and given is None:
         raise ValueError(
             f"dataset {dataset_meta.repo_id} mixes episode lengths {lengths[:5]}: indicator_ddpg needs one "
-            "fixed horizon (gamma and q0 follow from it)"
+            f"horizon T (gamma and q0 follow from it): pass --policy.horizon, e.g. {max(lengths) - 1}"
         )
-    return int(lengths[0]) - 1
+    return int(lengths[0]) - 1 if len(lengths) == 1 else given

@@ -3,10 +3,12 @@
 Observation and goal go through the *same* encoder (conv weights shared between them, paper appendix); actor
 and critic each own their encoder (as in the authors' sibling HER code). Both take dicts keyed by the
 compared observation keys; a goal dict uses the same keys (its values are goal observations), which is what
-makes hindsight relabeling a plain swap of tensors.
+makes hindsight relabeling a plain swap of tensors. An observation dict also holds the context keys
+(``config.context_keys``): state vectors appended, normalised, after ``[enc(o), enc(o_g)]``; a goal has none.
 """
 
 import functools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +29,8 @@ def mlp(in_dim: int, hidden_dims: list[int], out_dim: int) -> nn.Sequential:
 
 
 class ObservationEncoder(nn.Module):
-    """Normalises each compared key with its mean/std, encodes the images, flattens and appends the states.
+    """Normalises each compared key with its mean/std, encodes the images, flattens and appends the states;
+    ``context`` normalises and flattens the context keys of an observation (never of a goal).
 
     The same instance encodes observations and goals, so a goal is normalised with its *observation* key's
     statistics: relabeled goals (o_{t+1}, o_{t'}) and recorded goals share one representation. Images (stacked
@@ -44,14 +47,22 @@ class ObservationEncoder(nn.Module):
         self.state_keys = config.state_keys
         self.input_clip = config.input_clip
         self.augment_pad = config.augment_pad
-        for i, key in enumerate(config.observation_keys):
+        self.context_keys = list(config.context_keys or [])
+        # Context statistics come after the compared keys': without context the buffers are what they were.
+        inputs = config.observation_keys + self.context_keys
+        for i, key in enumerate(inputs):
             shape = tuple(config.input_features[key].shape)
             self.register_buffer(f"mean_{i}", torch.zeros(shape))
             self.register_buffer(f"std_{i}", torch.ones(shape))
-        self._index = {k: i for i, k in enumerate(config.observation_keys)}
+        self._index = {k: i for i, k in enumerate(inputs)}
         self.set_stats(dataset_stats or {})
 
-        self.out_dim = sum(int(torch.tensor(config.input_features[k].shape).prod()) for k in self.state_keys)
+        def size(keys: list[str]) -> int:
+            return sum(math.prod(config.input_features[k].shape) for k in keys)
+
+        self.out_dim = size(self.state_keys)
+        # Width of ``context``: what the actor's and critic's MLPs take besides [enc(o), enc(o_g)].
+        self.context_dim = size(self.context_keys)
         self.conv = None
         if self.image_keys:
             drq = config.image_encoder == "drq"
@@ -112,8 +123,8 @@ class ObservationEncoder(nn.Module):
 
     @torch.no_grad()
     def set_stats(self, stats: dict[str, dict[str, Tensor]]) -> None:
-        """Normalisation of each compared key (and so of its goal) from ``{key: {"mean", "std"}}``;
-        keys without stats keep theirs. The online trainer calls this every cycle with statistics of its
+        """Normalisation of each compared key (and so of its goal) and each context key from
+        ``{key: {"mean", "std"}}``; keys without stats keep theirs. The online trainer calls this every cycle with statistics of its
         replay buffer, since it has no dataset."""
         for key, i in self._index.items():
             if key not in stats or "mean" not in stats[key] or "std" not in stats[key]:
@@ -138,6 +149,18 @@ class ObservationEncoder(nn.Module):
 
     def normalize(self, key: str, x: Tensor) -> Tensor:
         return self.standardize(key, x).clamp(-self.input_clip, self.input_clip)
+
+    def context(self, obs: dict[str, Tensor]) -> list[Tensor]:
+        """The normalised, clipped, flattened context keys of a batch of observations, as one (B, context_dim)
+        tensor in a list (an empty list without context keys)."""
+        if not self.context_keys:
+            return []
+        return [torch.cat([self.normalize(k, as_float(obs[k])).flatten(1) for k in self.context_keys], 1)]
+
+    def join(self, h_obs: Tensor, h_goal: Tensor, obs: dict[str, Tensor]) -> Tensor:
+        """``[enc(o), enc(o_g), context(o)]``, what the actor's and critic's MLPs take, from the encodings
+        of o and o_g and the observation dict ``obs`` that ``h_obs`` encodes."""
+        return torch.cat([h_obs, h_goal, *self.context(obs)], dim=1)
 
     def forward(self, obs: dict[str, Tensor], shift: Tensor | None = None) -> Tensor:
         """Features of a batch of frames; ``shift`` (``draw_shifts``): translate each frame's images first
@@ -329,7 +352,7 @@ class ChannelsLastFlatten(nn.Module):
 
 @dataclass
 class Features:
-    """``[enc(o), enc(o_g)]`` as each network sees it in one update (``indicator_core.encode_batch``)."""
+    """``[enc(o), enc(o_g), context(o)]`` as each network sees it in one update (``encode_batch``)."""
 
     critic: Tensor  # (o_t, g) for Q(o_t, g, a_t), with gradients into the critic's encoder
     actor: Tensor  # (o_t, g) for pi(o_t, g): the critic's, detached, when the encoder is shared
@@ -340,19 +363,20 @@ class Features:
 
 
 class GoalConditioned(nn.Module):
-    """An encoder shared by observation and goal, then an MLP on ``[enc(o), enc(o_g)]``."""
+    """An encoder shared by observation and goal, then an MLP on ``[enc(o), enc(o_g), context(o)]``."""
 
     encoder: ObservationEncoder
     net: nn.Sequential
 
     def encode(self, obs: dict[str, Tensor], goal: dict[str, Tensor], shift: Tensor | None = None) -> Tensor:
-        """``[enc(o), enc(o_g)]``, both encoded in one call, both shifted by ``shift`` if given."""
+        """``[enc(o), enc(o_g), context(o)]``, o and o_g encoded in one call, both shifted by ``shift`` if
+        given."""
         shifts = None if shift is None else [shift, shift]
-        return torch.cat(encode_frames(self.encoder, [obs, goal], shifts), dim=1)
+        return self.encoder.join(*encode_frames(self.encoder, [obs, goal], shifts), obs)
 
 
 class Actor(GoalConditioned):
-    """pi(o, o_g) = tanh(MLP([enc(o), enc(o_g)])), in the env's [-1, 1] action space.
+    """pi(o, o_g) = tanh(MLP([enc(o), enc(o_g), context(o)])), in the env's [-1, 1] action space.
 
     With the shared ("drq") design the critic uses this encoder too and the actor's loss sees its features
     detached (``indicator_core.encode_batch``), so only the critic loss trains it."""
@@ -362,7 +386,9 @@ class Actor(GoalConditioned):
     ):
         super().__init__()
         self.encoder = ObservationEncoder(config, dataset_stats)
-        self.net = mlp(2 * self.encoder.out_dim, config.hidden_dims, config.action_dim)
+        self.net = mlp(
+            2 * self.encoder.out_dim + self.encoder.context_dim, config.hidden_dims, config.action_dim
+        )
 
     def head(self, features: Tensor) -> Tensor:
         return torch.tanh(self.net(features))
@@ -372,7 +398,7 @@ class Actor(GoalConditioned):
 
 
 class Critic(GoalConditioned):
-    """Q(o, o_g, a) = s MLP([enc(o), enc(o_g), a]) with s = ``config.q_output_scale``; Q starts at
+    """Q(o, o_g, a) = s MLP([enc(o), enc(o_g), context(o), a]) with s = ``config.q_output_scale``; Q starts at
     ``config.initial_q`` (the output bias, Q initialised low).
 
     ``encode`` and ``head`` are split so a DDPG step encodes (o, o_g) once for Q(o, o_g, a) and
@@ -388,7 +414,8 @@ class Critic(GoalConditioned):
     ):
         super().__init__()
         self.encoder = encoder if encoder is not None else ObservationEncoder(config, dataset_stats)
-        self.net = mlp(2 * self.encoder.out_dim + config.action_dim, config.hidden_dims, 1)
+        inputs = 2 * self.encoder.out_dim + self.encoder.context_dim + config.action_dim
+        self.net = mlp(inputs, config.hidden_dims, 1)
         # Low initial Q keeps every Q below q0, so reward filtering cannot fire before the critic has learnt
         # (paper section 5.3). The minimum achievable return is the natural "low" value.
         self.output_scale = config.q_output_scale

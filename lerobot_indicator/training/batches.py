@@ -9,10 +9,16 @@ from lerobot_indicator.policy.networks_indicator_ddpg import as_float
 
 
 def to_transition_batch(
-    sample: dict, keys: list[str], horizon: int, device: torch.device | str
+    sample: dict,
+    keys: list[str],
+    horizon: int,
+    device: torch.device | str,
+    context_keys: list[str] | None = None,
 ) -> dict[str, torch.Tensor]:
     """Replay-buffer sample -> the learning core's transition batch.
 
+    ``keys`` are the compared keys; ``context_keys`` come with o_t, o_{t+1} and the n-step path (the frames
+    the networks read), never with the future frame, which is only ever a goal.
     ``future.count`` = |{t+2..T}| lets the unbalanced (HER-style) mode pick o_{t+1} with the right
     probability, so its future goal is uniform over {t+1..T}."""
 
@@ -31,6 +37,11 @@ def to_transition_batch(
         batch[k] = t(sample["obs"][k])
         batch[core.NEXT + k] = t(sample["next_obs"][k])
         batch[core.FUTURE + k] = t(sample["future_obs"][k])
+        if "path_obs" in sample:
+            batch[core.PATH + k] = t(sample["path_obs"][k])
+    for k in context_keys or []:
+        batch[k] = t(sample["obs"][k])
+        batch[core.NEXT + k] = t(sample["next_obs"][k])
         if "path_obs" in sample:
             batch[core.PATH + k] = t(sample["path_obs"][k])
     if "path_obs" in sample:

@@ -13,6 +13,8 @@ from lerobot.configs.default import DatasetConfig, WandBConfig
 from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.hub import HubMixin
 
+from lerobot_indicator.io_errors import ConfigError
+
 TRAIN_CONFIG_NAME = "train_config.json"
 INPUT_STATS = ("running", "first_cycle")
 BACKENDS = ("local", "ray")
@@ -74,7 +76,7 @@ class OnlineTrainConfig(HubMixin):
     job_name: str | None = None
     resume: bool = False
     seed: int = 1000
-    # Total optimisation steps (gradient updates), as in lerobot-train. Cycles = steps / updates_per_cycle.
+    # Total optimisation steps (gradient updates), as in lerobot-train; the last cycle runs only what is left.
     steps: int = 2000
     # In optimisation steps, checked at cycle ends (0 disables). Eval also runs after the last cycle.
     env_eval_freq: int = 400
@@ -90,7 +92,7 @@ class OnlineTrainConfig(HubMixin):
     keep_freed_memory: bool = True
     # Threads of each video decoder this process (and its forked workers) opens; None = FFmpeg's choice.
     video_decoder_threads: int | None = 1
-    # Filled by validate() on --resume: the checkpoint to continue from.
+    # LeRobot's training-config field; unused: --resume=true continues from the run's resume/ state alone.
     checkpoint_path: Path | None = field(init=False, default=None)
 
     def validate(self) -> None:
@@ -127,8 +129,12 @@ class OnlineTrainConfig(HubMixin):
                 raise ValueError(
                     f"--{name} must be null (the library's choice) or >= 1, got {getattr(self, name)}"
                 )
-        if self.steps < o.updates_per_cycle:
-            raise ValueError(f"--steps={self.steps} is less than one cycle (--online.updates_per_cycle)")
+        if self.steps < 1:
+            raise ValueError(f"--steps must be >= 1, got {self.steps}")
+        if self.record.repo_id is not None:
+            from lerobot_indicator.data.recorder import check_repo_id
+
+            check_repo_id(self.record.repo_id, "--record.repo_id")
         if not self.job_name:
             self.job_name = f"{self.env.type}_{self.policy.type}_online"
         if self.output_dir is None:
@@ -136,18 +142,14 @@ class OnlineTrainConfig(HubMixin):
             self.output_dir = Path("outputs/train") / f"{now:%Y-%m-%d}/{now:%H-%M-%S}_{self.job_name}"
         self.output_dir = Path(self.output_dir)
         if self.resume:
-            # The per-cycle resume state (resume/) is what a run continues from; a LeRobot checkpoint, when
-            # one exists already, also supplies the policy config, so --policy.* need not be repeated.
-            last = self.output_dir / "checkpoints" / "last"
+            # The per-cycle resume state (resume/: weights, optimizer, counters) is all a run continues from, so a
+            # missing or corrupt checkpoints/last never blocks a resume; the same command gives the same policy.
             has_state = any((self.output_dir / d).exists() for d in ("resume", "resume.old"))
             if not has_state:
                 held = sorted(p.name for p in self.output_dir.iterdir()) if self.output_dir.is_dir() else []
                 raise FileNotFoundError(
                     f"--resume=true but {self.output_dir} has no resume state (resume/); it holds {held or 'nothing'}"
                 )
-            if last.exists():
-                self.checkpoint_path = last.resolve()
-                self.policy.pretrained_path = self.checkpoint_path / "pretrained_model"
         elif self.output_dir.is_dir() and any(self.output_dir.iterdir()):
             held = sorted(p.name for p in self.output_dir.iterdir())
             raise FileExistsError(
@@ -173,6 +175,24 @@ class OnlineTrainConfig(HubMixin):
     @classmethod
     def __get_path_fields__(cls) -> list[str]:
         return ["policy"]
+
+    @classmethod
+    def from_pretrained(
+        cls, pretrained_name_or_path: str | Path, *, cli_args: list[str] | None = None, **kwargs
+    ) -> "OnlineTrainConfig":
+        """``--config_path``: a training config file (YAML or JSON, e.g. a run's ``train_config.json``; an
+        ``env_configs/*.yaml`` holds only ``env``, the rest comes from the command line) or a directory holding
+        ``train_config.json`` (a checkpoint's ``pretrained_model``); command-line options override it."""
+        path = Path(pretrained_name_or_path)
+        if path.is_dir():
+            path = path / TRAIN_CONFIG_NAME
+        if not path.is_file():
+            raise ConfigError(
+                f"--config_path={pretrained_name_or_path}: no such file; pass a training config (YAML or JSON) "
+                f"or a directory holding {TRAIN_CONFIG_NAME}"
+            )
+        with draccus.config_type("json" if path.suffix == ".json" else "yaml"):
+            return draccus.parse(cls, config_path=str(path), args=list(cli_args or []))
 
     def _save_pretrained(self, save_directory: Path) -> None:
         with open(Path(save_directory) / TRAIN_CONFIG_NAME, "w") as f, draccus.config_type("json"):

@@ -12,10 +12,13 @@ loadable by ``lerobot-eval --policy.path``) are written every ``save_freq`` step
 Benchmarks and loggers time the phases through ``TrainerHooks`` (``hooks``).
 """
 
+import dataclasses
 import functools
 import logging
 import math
+import shutil
 import signal
+import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,25 +28,32 @@ import torch
 from lerobot.common.train_utils import get_step_checkpoint_dir, save_checkpoint, update_last_checkpoint
 from lerobot.configs import parser
 from lerobot.envs import close_envs, make_env, make_env_pre_post_processors
+from lerobot.envs.utils import env_to_policy_features
 from lerobot.policies import make_policy, make_pre_post_processors
+from lerobot.utils.constants import CHECKPOINTS_DIR, LAST_CHECKPOINT_LINK, PRETRAINED_MODEL_DIR
 from lerobot.utils.import_utils import register_third_party_plugins
 from lerobot.utils.random_utils import set_seed
 from lerobot.utils.utils import init_logging
 from tqdm import tqdm
 
 from lerobot_indicator import process
+from lerobot_indicator.data.errors import one_line, one_line_errors
+from lerobot_indicator.envs.base import OBS_TYPES
 from lerobot_indicator.finite import NonFiniteError, check_module
+from lerobot_indicator.io_errors import ConfigError, DiskFullError, is_disk_full, report_line
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
+from lerobot_indicator.policy.input_checks import PolicyInputError, check_policy_inputs, input_problems
 from lerobot_indicator.stop_signals import exit_code, raise_interrupted
 from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
 from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
+from lerobot_indicator.training.hub_push import PolicyPushError, push_policy
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.recording import RolloutRecorder
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import EpisodeBatch, Processors, Rollouts, run_episodes, stored_keys
-from lerobot_indicator.training.run_state import METRICS_FILE, Progress, RunPersistence
+from lerobot_indicator.training.run_state import METRICS_FILE, Progress, RunPersistence, kept_state
 
 # A cycle's mean std of Q over the batch below this: the critic ignores its inputs. Runs measured 0.01-0.2 in
 # their first cycle (rope and reach from pixels) and 7e-7 for a saturated critic (critic_saturation.json).
@@ -66,10 +76,25 @@ class OnlineTrainer:
     def __init__(self, cfg: OnlineTrainConfig, hooks: TrainerHooks | None = None):
         self.cfg = cfg
         self.hooks = hooks or TrainerHooks()
+        try:
+            check_env_inputs(cfg)
+        except PolicyInputError as err:
+            raise ConfigError(one_line(err)) from err
+        o = cfg.online
+        logging.info(
+            "building %d %s env(s)%s, the %s indicator_ddpg policy and its replay buffer; then each cycle "
+            "collects %d episode(s) and makes %d updates (%d steps in all)",
+            o.n_envs,
+            cfg.env.type,
+            f" (obs_type={cfg.env.obs_type})" if hasattr(cfg.env, "obs_type") else "",
+            f"pretrained ({cfg.policy.pretrained_path})" if cfg.policy.pretrained_path else "new",
+            o.episodes_per_cycle,
+            o.updates_per_cycle,
+            cfg.steps,
+        )
         self.out = Path(cfg.output_dir)
         self.out.mkdir(parents=True, exist_ok=True)
         set_seed(cfg.seed)
-        o = cfg.online
         self.vec_env = make_env(cfg.env, n_envs=o.n_envs, use_async_envs=o.use_async_envs)[cfg.env.type][0]
         env_pre, env_post = make_env_pre_post_processors(cfg.env, cfg.policy)
         self.horizon = int(self.vec_env.call("_max_episode_steps")[0])
@@ -88,20 +113,22 @@ class OnlineTrainer:
         self.processors = Processors(env_pre=env_pre, env_post=env_post, pre=pre, post=post)
         self.optimizer = cfg.policy.get_optimizer_preset().build(self.policy.get_optim_params())
         self.keys = cfg.policy.observation_keys
+        self.context_keys = cfg.policy.context_keys
         visual = any(
             ft.type.name == "VISUAL" for k, ft in cfg.policy.input_features.items() if k in self.keys
         )
         if visual and cfg.policy.n_step == 1 and cfg.policy.inverse_dynamics == 0:
-            # The paper's one-step target from images: a choice to make knowingly (docs/results/README.md).
+            # Chosen with --policy.preset=paper or these flags (the default gives images n_step=3): say what it costs.
             logging.info(
-                "indicator_ddpg from images with the paper's one-step target: on RGB-D reach it did not learn "
-                "in 10,000 env steps where --policy.n_step=3 --policy.inverse_dynamics=1.0 did "
-                "(docs/results/README.md, RGB-D Sawyer reach)"
+                "indicator_ddpg from images with the paper's one-step target and no inverse dynamics: on RGB-D "
+                "reach it did not learn in 10,000 env steps where the default (--policy.preset=auto: n_step=3, "
+                "inverse_dynamics=1.0) did (docs/results/experiments_rgbd/)"
             )
         self.batch_size = o.batch_size or (128 if visual else 256)
         capacity = o.buffer_capacity or (5_000 if visual else 1_000_000)
         self.buffer = EpisodeReplayBuffer(capacity, self.horizon)
         self.progress = Progress()
+        # The last cycle runs only the updates left, so a run makes exactly --steps updates.
         self.n_cycles = math.ceil(cfg.steps / o.updates_per_cycle)
         self.episodes_per_cycle = math.ceil(o.episodes_per_cycle / o.n_envs) * o.n_envs
         recorder = RolloutRecorder(cfg, self.vec_env, self.keys) if cfg.record.repo_id else None
@@ -124,8 +151,9 @@ class OnlineTrainer:
             total=self.cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step"
         )
         try:
-            while self.progress.cycle < self.n_cycles:
+            while self.progress.step < self.cfg.steps:
                 cycle, t0 = self.progress.cycle, time.perf_counter()
+                n_updates = min(self.cfg.online.updates_per_cycle, self.cfg.steps - self.progress.step)
                 rng, generator = self._cycle_randomness(cycle)
                 if self.hooks.on_cycle_start is not None:
                     self.hooks.on_cycle_start(cycle)
@@ -134,10 +162,10 @@ class OnlineTrainer:
                 # Into the replay buffer, its on-disk chunks and the --record dataset; input statistics.
                 self.store(rollouts)
                 # Relabel -> indicator reward -> filter -> DDPG update, by the learning core.
-                stats = self.optimise(rng, generator)
+                stats = self.optimise(rng, generator, n_updates)
                 # Evaluate, log, checkpoint and save the resume state, each when due.
-                record = self.end_cycle(cycle, rollouts, stats, t0)
-                bar.update(self.cfg.online.updates_per_cycle)
+                record = self.end_cycle(cycle, rollouts, stats, t0, n_updates)
+                bar.update(n_updates)
                 bar.set_postfix(
                     env_steps=self.progress.env_steps,
                     success=f"{record.get('eval_success_rate', record['train_success_rate']):.2f}",
@@ -163,7 +191,7 @@ class OnlineTrainer:
         keep_frames = explore and self.persistence.keeps_dataset_frames
         return [
             run_episodes(
-                self.vec_env, self.policy, self.processors, stored_keys(self.keys), self.horizon,
+                self.vec_env, self.policy, self.processors, stored_keys(self.keys, self.context_keys), self.horizon,
                 seeds=list(seeds[i : i + n]), explore=explore, generator=generator, random_eps=random_eps,
                 keep_dataset_frames=keep_frames,
             )
@@ -187,7 +215,7 @@ class OnlineTrainer:
         if self.ray_rollouts is not None:
             rollouts = self.ray_rollouts.collect(batches, self.policy)
         else:
-            keys = stored_keys(self.keys)
+            keys = stored_keys(self.keys, self.context_keys)
             rollouts = [
                 b.run(self.vec_env, self.policy, self.processors, keys, self.horizon) for b in batches
             ]
@@ -213,8 +241,12 @@ class OnlineTrainer:
         self.progress.episodes += n_episodes
         self.progress.env_steps += n_episodes * self.horizon
 
-    def optimise(self, rng: np.random.Generator, generator: torch.Generator) -> dict[str, float]:
-        """``updates_per_cycle`` learning-core updates on replay batches; their mean statistics."""
+    def optimise(
+        self, rng: np.random.Generator, generator: torch.Generator, n_updates: int | None = None
+    ) -> dict[str, float]:
+        """``n_updates`` (default ``updates_per_cycle``) learning-core updates on replay batches; their mean
+        statistics."""
+        n_updates = self.cfg.online.updates_per_cycle if n_updates is None else n_updates
         t0 = time.perf_counter()
         self.policy.train()
         sums: dict[str, float] = {}
@@ -222,10 +254,10 @@ class OnlineTrainer:
         data_s = update_s = (
             0.0  # wall time of the cycle sampling the buffer / updating (lerobot-train's split)
         )
-        for _ in range(self.cfg.online.updates_per_cycle):
+        for _ in range(n_updates):
             t_data = time.perf_counter()
             sample = self.buffer.sample(self.batch_size, rng, packed=True, n_step=n_step)
-            batch = to_transition_batch(sample, self.keys, self.horizon, self.device)
+            batch = to_transition_batch(sample, self.keys, self.horizon, self.device, self.context_keys)
             t_update = time.perf_counter()
             loss, stats = self.policy.forward(batch, generator=generator)
             self.optimizer.zero_grad(set_to_none=True)
@@ -236,7 +268,7 @@ class OnlineTrainer:
             for k, v in stats.items():
                 sums[k] = sums.get(k, 0.0) + v
             data_s, update_s = data_s + t_update - t_data, update_s + time.perf_counter() - t_update
-        means = {k: v / self.cfg.online.updates_per_cycle for k, v in sums.items()}
+        means = {k: v / n_updates for k, v in sums.items()}
         means |= {"data_s": data_s, "update_s": update_s}
         self._phase_end(self.hooks.on_update_end, t0, means)
         return means
@@ -253,11 +285,19 @@ class OnlineTrainer:
         self._phase_end(self.hooks.on_eval_end, t0, metrics)
         return metrics
 
-    def end_cycle(self, cycle: int, rollouts: list[Rollouts], stats: dict[str, float], t0: float) -> dict:
-        """Evaluate, log, checkpoint and save the resume state as due; returns the cycle's metrics."""
+    def end_cycle(
+        self,
+        cycle: int,
+        rollouts: list[Rollouts],
+        stats: dict[str, float],
+        t0: float,
+        n_updates: int | None = None,
+    ) -> dict:
+        """Evaluate, log, checkpoint and save the resume state as due (the cycle made ``n_updates``, default
+        ``updates_per_cycle``); returns the cycle's metrics."""
         cfg = self.cfg
-        prev_step = self.progress.step - cfg.online.updates_per_cycle
-        is_last = cycle == self.n_cycles - 1
+        prev_step = self.progress.step - (cfg.online.updates_per_cycle if n_updates is None else n_updates)
+        is_last = self.progress.step >= cfg.steps
 
         def due(freq: int) -> bool:
             return is_last or (freq > 0 and self.progress.step // freq > prev_step // freq)
@@ -287,7 +327,8 @@ class OnlineTrainer:
         cfg = self.cfg
         seed = None
         if cfg.dataset is not None:
-            seed = functools.partial(seed_buffer, self.buffer, cfg.dataset, stored_keys(self.keys))
+            stored = stored_keys(self.keys, self.context_keys)
+            seed = functools.partial(seed_buffer, self.buffer, cfg.dataset, stored)
         if cfg.resume:
             self.optimizer, self.progress = self.persistence.resume(
                 self.policy, self.optimizer, self.buffer, seed
@@ -322,13 +363,17 @@ class OnlineTrainer:
         if self._warned_constant_critic or q_std is None or q_std >= CONSTANT_Q_STD:
             return
         self._warned_constant_critic = True
+        if self.policy.config.critic_output_scale == "return":
+            remedy = "the critic output is already return-scaled: try another seed or a lower learning rate"
+        else:
+            remedy = "rerun with --policy.critic_output_scale=return (docs/policy.md)"
         logging.warning(
             "the critic gives the same Q (%.3g, std %.2g over the batch) for every input at step %d: its last "
-            "tanh layer has saturated and gets no gradient, so this run will not learn; rerun with "
-            "--policy.critic_output_scale=return (docs/policy.md)",
+            "tanh layer has saturated and gets no gradient, so this run will not learn; %s",
             stats.get("q_mean", float("nan")),
             q_std,
             self.progress.step,
+            remedy,
         )
 
     def _log(self, record: dict) -> None:
@@ -342,16 +387,23 @@ class OnlineTrainer:
         """LeRobot-train layout, loadable by ``lerobot-eval --policy.path=<dir>/pretrained_model``."""
         check_module(self.policy, "checkpoint")
         ckpt = get_step_checkpoint_dir(self.out, self.cfg.steps, self.progress.step)
-        save_checkpoint(
-            ckpt,
-            self.progress.step,
-            self.cfg,
-            self.policy,
-            self.optimizer,
-            None,
-            self.processors.pre,
-            self.processors.post,
-        )
+        try:
+            save_checkpoint(
+                ckpt,
+                self.progress.step,
+                self.cfg,
+                self.policy,
+                self.optimizer,
+                None,
+                self.processors.pre,
+                self.processors.post,
+            )
+        except Exception:
+            # A part-written checkpoint (e.g. the disk filled up) goes, unless checkpoints/last points at it.
+            last = self.out / "checkpoints" / "last"
+            if not (last.exists() and last.resolve() == ckpt.resolve()):
+                shutil.rmtree(ckpt, ignore_errors=True)
+            raise
         update_last_checkpoint(ckpt)
         return ckpt
 
@@ -366,10 +418,14 @@ class OnlineTrainer:
         tags = ["lerobot-indicator", "indicator-rewards", cfg.env.type]
         self.persistence.finish(tags if cfg.record.push_to_hub else None)
         if cfg.policy.push_to_hub:
-            self.policy.push_model_to_hub(cfg)
-            self.processors.pre.push_to_hub(cfg.policy.repo_id)
-            self.processors.post.push_to_hub(cfg.policy.repo_id)
+            push_policy(self.policy, self.processors, cfg, self.batch_size, self._kept_policy)
         return {**self._last_eval, "env_steps": self.progress.env_steps, "steps": self.progress.step}
+
+    def _kept_policy(self) -> Path:
+        """The trained policy on disk: the last checkpoint (saved after the last cycle), or one saved now."""
+        last = self.out / CHECKPOINTS_DIR / LAST_CHECKPOINT_LINK
+        checkpoint = last if self.cfg.save_checkpoint and last.exists() else self.save_checkpoint()
+        return checkpoint.resolve() / PRETRAINED_MODEL_DIR
 
     def close(self) -> None:
         """Also on a crash: finalize the recorded dataset so every saved episode stays readable."""
@@ -394,6 +450,48 @@ def train_metrics(rollouts: list[Rollouts]) -> dict[str, float]:
     }
 
 
+def env_input_fix(env_cfg, policy_cfg) -> str:
+    """The ``--env.*`` options under which the env gives the policy's inputs in their shapes, as a hint."""
+    if not hasattr(env_cfg, "obs_type"):
+        return ""
+    for obs_type in OBS_TYPES:
+        try:
+            alt = dataclasses.replace(env_cfg, obs_type=obs_type)
+        except (ValueError, TypeError):
+            continue
+        missing, shapes = input_problems(policy_cfg, env_to_policy_features(alt))
+        if missing:
+            continue
+        fixes = [] if obs_type == env_cfg.obs_type else [f"--env.obs_type={obs_type}"]
+        for policy_shape, _ in shapes.values():
+            if len(policy_shape) == 3:  # (C, H, W): the camera size
+                fixes.append(f"--env.camera.height={policy_shape[1]} --env.camera.width={policy_shape[2]}")
+        if fixes:
+            return "use " + " ".join(dict.fromkeys(fixes))
+    return ""
+
+
+def check_env_inputs(cfg: OnlineTrainConfig) -> None:
+    """Before anything is built: the env gives every input the policy reads (``--policy.observation_keys``, or a
+    pretrained policy's keys) in the shape it was made for; else one line with the fix."""
+    features = env_to_policy_features(cfg.env)
+    obs_type = getattr(cfg.env, "obs_type", None)
+    source = f"env {cfg.env.type}" + (f" (obs_type={obs_type})" if obs_type else "")
+    if input_problems(cfg.policy, features) != ([], {}):
+        check_policy_inputs(cfg.policy, features, source, env_input_fix(cfg.env, cfg.policy))
+
+
+def check_config_path(args: list[str]) -> None:
+    """``--config_path`` names a file or a directory (LeRobot's parser would open a missing one with a
+    traceback)."""
+    path = parser.parse_arg("config_path", args)
+    if path and not Path(path).exists():
+        raise ConfigError(
+            f"--config_path={path}: no such file; pass a training config (YAML or JSON) or a directory holding "
+            "train_config.json"
+        )
+
+
 def apply_process_settings(cfg: OnlineTrainConfig) -> None:
     """``--cpu_threads`` (when the policy trains on CPU), ``--keep_freed_memory``, ``--video_decoder_threads``."""
     on_cpu = torch.device(cfg.policy.device or "cpu").type == "cpu"
@@ -402,14 +500,25 @@ def apply_process_settings(cfg: OnlineTrainConfig) -> None:
 
 @parser.wrap()
 def train(cfg: OnlineTrainConfig) -> dict[str, float]:
-    cfg.validate()
+    try:
+        cfg.validate()
+    except (ValueError, FileNotFoundError, FileExistsError) as err:
+        raise ConfigError(one_line(err)) from err
     trainer = OnlineTrainer(cfg)
     # Once the trainer is built, so the env worker processes it started keep the libraries' defaults.
     apply_process_settings(cfg)
     try:
-        return trainer.train()
-    finally:
-        trainer.close()
+        try:
+            return trainer.train()
+        finally:
+            trainer.close()
+    except Exception as err:
+        if not is_disk_full(err):
+            raise
+        raise DiskFullError(
+            f"stopped: the disk holding {trainer.out} is full ({one_line(err)}). Kept: {kept_state(trainer.out)}. "
+            "Free some space, then run the same command with --resume=true"
+        ) from err
 
 
 def main() -> None:
@@ -417,7 +526,12 @@ def main() -> None:
     register_third_party_plugins()
     signal.signal(signal.SIGTERM, raise_interrupted)  # stop as on Ctrl-C: workers, dataset, wandb closed
     try:
-        train()
+        check_config_path(sys.argv[1:])
+        with one_line_errors():  # bad dataset content: one line naming the file, key, episode, frame
+            train()
+    except PolicyPushError as e:
+        logging.error("%s", e)
+        raise SystemExit(1) from None
     except NonFiniteError as e:
         logging.error(
             "stopped: %s. Nothing non-finite was saved; the last checkpoint and resume state are kept.", e
@@ -429,6 +543,13 @@ def main() -> None:
             "last dataset checkpoint) with the same command and --resume=true"
         )
         raise SystemExit(exit_code(exc)) from None
+    except Exception as exc:
+        # A config error, a corrupt file read or a full disk: one line (io_errors), any other error its traceback.
+        line = report_line(exc)
+        if line is None:
+            raise
+        print(line, file=sys.stderr, flush=True)
+        raise SystemExit(1) from None
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import json
+import math
 from pathlib import Path
 
 import matplotlib
@@ -23,7 +23,10 @@ STYLES = ({"lw": 2.2, "ls": "-"}, {"lw": 1.2, "ls": "--"})
 
 
 def read_metrics(path: Path) -> list[dict]:
-    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+    """The rows of ``metrics.jsonl`` (a last line cut short is skipped), ``null`` values as NaN."""
+    from lerobot_indicator.training.run_state import read_metrics_rows
+
+    return [{k: math.nan if v is None else v for k, v in row.items()} for row in read_metrics_rows(path)]
 
 
 def learning_curve_figure(rows: list[dict], title: str | None = None) -> plt.Figure:

@@ -100,7 +100,7 @@ class RolloutWorker:
         env_pre, env_post = make_env_pre_post_processors(cfg.env, policy_cfg)
         pre, post = make_pre_post_processors(policy_cfg)
         self.processors = Processors(env_pre=env_pre, env_post=env_post, pre=pre, post=post)
-        self.keys = stored_keys(policy_cfg.observation_keys)
+        self.keys = stored_keys(policy_cfg.observation_keys, policy_cfg.context_keys)
 
     def set_weights(self, weights: dict[str, torch.Tensor]) -> None:
         self.policy.actor.load_state_dict(weights)

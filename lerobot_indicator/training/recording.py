@@ -10,8 +10,14 @@ from __future__ import annotations
 import gymnasium as gym
 
 from lerobot_indicator.data.checkpoint import INFO
-from lerobot_indicator.data.features import dataset_features, unbatch
-from lerobot_indicator.data.recorder import RecordConfig, open_recording, write_episode
+from lerobot_indicator.data.features import dataset_features, env_feature_names, env_robot_type, unbatch
+from lerobot_indicator.data.recorder import (
+    RecordConfig,
+    env_args,
+    open_recording,
+    push_dataset,
+    write_episode,
+)
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.rollout import Rollouts
 
@@ -33,10 +39,16 @@ class RolloutRecorder:
         self.cfg.resume = cfg.resume and (self.cfg.root / INFO).exists()
         _, info = vec_env.reset(seed=cfg.seed)
         features = dataset_features(
-            vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), False
-        )
+            vec_env.single_observation_space, vec_env.single_action_space, unbatch(info), False,
+            env_feature_names(vec_env),
+        )  # fmt: skip
         self.task = str(vec_env.call("task_description")[0])
-        self.session = open_recording(self.cfg, features, horizon=None)
+        self.session = open_recording(self.cfg, features, horizon=None, robot_type=env_robot_type(vec_env))
+        # The dataset card's command: the training run whose behaviour-policy episodes these are.
+        self.command = " ".join(
+            ["lerobot-indicator-train --policy.type=indicator_ddpg", *env_args(cfg.env),
+             f"--seed={cfg.seed}", f"--steps={cfg.steps}", f"--record.repo_id={r.repo_id}"]
+        )  # fmt: skip
         self.skip = 0
 
     @property
@@ -69,7 +81,7 @@ class RolloutRecorder:
     def finish(self, push_tags: list[str] | None) -> None:
         self.session.close()
         if push_tags is not None:
-            self.session.committed_dataset().push_to_hub(tags=push_tags)
+            push_dataset(self.session.committed_dataset(), self.cfg, push_tags, self.command)
 
     def close(self) -> None:
         """Also on a crash: stop LeRobot's writer; every committed episode stays as it is."""

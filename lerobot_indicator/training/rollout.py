@@ -78,9 +78,10 @@ class EpisodeBatch:
         )  # fmt: skip
 
 
-def stored_keys(observation_keys: list[str]) -> list[str]:
-    """What a rollout keeps: the compared keys and their goals (never ground truth or unused cameras)."""
-    return [*observation_keys, *(goal_key(k) for k in observation_keys)]
+def stored_keys(observation_keys: list[str], context_keys: list[str] | None = None) -> list[str]:
+    """What a rollout keeps: the compared keys, their goals and the context keys (never ground truth or
+    unused cameras)."""
+    return [*observation_keys, *(goal_key(k) for k in observation_keys), *(context_keys or [])]
 
 
 def env_batch(obs: dict, vec_env: gym.vector.VectorEnv, env_pre: Any) -> dict:

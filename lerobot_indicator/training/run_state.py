@@ -4,7 +4,8 @@
   leaves the previous state intact;
 * ``replay/cycle_*.npz``: each cycle's new episodes; a file is deleted once the replay buffer's FIFO has
   evicted all of its episodes, so disk use stays bounded by the buffer capacity;
-* ``metrics.jsonl``: one line per cycle; a resumed run drops the lines written after its state.
+* ``metrics.jsonl``: one strict-JSON line per cycle (a non-finite value is ``null``); a resumed run drops the
+  lines written after its state, and a last line cut short by a crash or a full disk.
 
 ``RunPersistence`` is the trainer's interface to all of it plus the optional ``--record`` dataset.
 """
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -24,6 +26,7 @@ from lerobot.optim import load_optimizer_state, save_optimizer_state
 from safetensors.torch import load_model, save_model
 
 from lerobot_indicator.finite import check_module
+from lerobot_indicator.io_errors import CorruptFileError, reading
 from lerobot_indicator.keys import GT_ACHIEVED_GOAL, GT_DESIRED_GOAL
 from lerobot_indicator.training.recording import RolloutRecorder
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
@@ -34,6 +37,10 @@ RESUME_DIR = "resume"
 REPLAY_DIR = "replay"
 # Array names inside a replay chunk besides ``obs/<key>``.
 CHUNK_ACTIONS, CHUNK_GT_ACHIEVED, CHUNK_GT_DESIRED = "actions", "gt_achieved", "gt_desired"
+# What a CorruptFileError in the resume state says to do.
+RESUME_HINT = (
+    "this run cannot resume from it; start a new run, or a --policy.path run from one of its checkpoints"
+)
 
 
 @dataclass
@@ -100,10 +107,14 @@ class RunDir:
         tmp, final, old = (self.out / f"{RESUME_DIR}{s}" for s in (".tmp", "", ".old"))
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        check_module(policy, "resume state")
-        save_model(policy, str(tmp / "model.safetensors"))  # handles the shared encoder
-        save_optimizer_state(optimizer, tmp)
-        (tmp / "progress.json").write_text(json.dumps(progress.__dict__))
+        try:
+            check_module(policy, "resume state")
+            save_model(policy, str(tmp / "model.safetensors"))  # handles the shared encoder
+            save_optimizer_state(optimizer, tmp)
+            (tmp / "progress.json").write_text(json.dumps(progress.__dict__))
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)  # e.g. the disk filled up: free what was written
+            raise
         if final.exists():
             final.rename(old)
         tmp.rename(final)
@@ -113,7 +124,9 @@ class RunDir:
         self._evicted.clear()
 
     def read_progress(self) -> Progress:
-        progress = Progress(**json.loads((self.state_dir() / "progress.json").read_text()))
+        path = self.state_dir() / "progress.json"
+        with reading(path, "resume state's counters", RESUME_HINT):
+            progress = Progress(**json.loads(path.read_text()))
         progress.replay_files = [(name, int(first)) for name, first in progress.replay_files]
         return progress
 
@@ -121,13 +134,18 @@ class RunDir:
         self, policy: torch.nn.Module, optimizer: torch.optim.Optimizer
     ) -> tuple[torch.optim.Optimizer, Progress]:
         state = self.state_dir()
-        load_model(policy, str(state / "model.safetensors"))
-        return load_optimizer_state(optimizer, state), self.read_progress()
+        with reading(state / "model.safetensors", "resume state's weights", RESUME_HINT):
+            load_model(policy, str(state / "model.safetensors"))
+        with reading(state, "resume state's optimizer state (optimizer_*)", RESUME_HINT):
+            optimizer = load_optimizer_state(optimizer, state)
+        return optimizer, self.read_progress()
 
     def replay_chunks(self, files: list[tuple[str, int]]) -> Iterator[dict[str, np.ndarray]]:
         for name, _ in files:
-            with np.load(self.out / REPLAY_DIR / name) as chunk:
-                yield dict(chunk)
+            path = self.out / REPLAY_DIR / name
+            with reading(path, "replay chunk", RESUME_HINT), np.load(path) as chunk:
+                data = dict(chunk)
+            yield data
 
     def append_replay(
         self, rollouts: list[Rollouts], buffer: EpisodeReplayBuffer, progress: Progress
@@ -145,15 +163,70 @@ class RunDir:
             self._evicted.append(progress.replay_files.pop(0)[0])
 
     def append_metrics(self, record: dict) -> None:
+        """One line, in one write: a crash or a full disk can only cut the last line short."""
         with open(self.out / METRICS_FILE, "a") as f:
-            f.write(json.dumps(record) + "\n")
+            f.write(metrics_line(record))
 
     def drop_metrics_from(self, cycle: int) -> None:
-        """Drop the metrics lines of cycles >= ``cycle`` (written after the state a run resumes from)."""
+        """Drop the metrics lines of cycles >= ``cycle`` (written after the state a run resumes from) and a last
+        line cut short; rewritten atomically."""
         metrics = self.out / METRICS_FILE
         if metrics.exists():
-            lines = [ln for ln in metrics.read_text().splitlines() if json.loads(ln)["cycle"] < cycle]
-            metrics.write_text("".join(f"{ln}\n" for ln in lines))
+            rows = [r for r in read_metrics_rows(metrics) if r["cycle"] < cycle]
+            tmp = metrics.with_name(f"{METRICS_FILE}.tmp")
+            tmp.write_text("".join(metrics_line(r) for r in rows))
+            tmp.replace(metrics)
+
+
+def _strict(value):
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value
+
+
+def metrics_line(record: dict) -> str:
+    """``record`` as one strict-JSON line: NaN and +-inf (e.g. no ground-truth distance) are ``null``."""
+    return json.dumps(_strict(record), allow_nan=False) + "\n"
+
+
+def read_metrics_rows(path: Path) -> list[dict]:
+    """The rows of a ``metrics.jsonl``. A last line that is not JSON (cut short by a crash or a full disk while
+    it was appended) is skipped with a warning; any other line that is not JSON is a one-line error."""
+    lines = Path(path).read_text().splitlines()
+    rows = []
+    for i, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError as err:
+            if i == len(lines) - 1:
+                logging.warning(
+                    "%s: skipping its last line, cut short (%d characters): %s", path, len(line), err
+                )
+                break
+            raise CorruptFileError(
+                f"{path}:{i + 1}: not a JSON line ({err}); only the last line can be cut short by a crash"
+            ) from None
+    return rows
+
+
+def kept_state(out: Path) -> str:
+    """What a run directory holds to continue from, for the message of a run stopped while saving."""
+    kept = []
+    last = Path(out) / "checkpoints" / "last"
+    if last.exists():
+        kept.append(f"the last complete checkpoint {last.resolve()}")
+    try:
+        progress = RunDir(out).read_progress()
+        kept.append(f"the resume state of cycle {progress.cycle - 1} (step {progress.step})")
+    except (FileNotFoundError, ValueError, RuntimeError):
+        pass
+    return " and ".join(kept) if kept else "nothing to resume from yet"
 
 
 class RunPersistence:

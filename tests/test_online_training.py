@@ -382,16 +382,29 @@ def test_constant_critic_warning_fires_once_below_the_threshold(caplog):
 
     from lerobot_indicator.training.online import CONSTANT_Q_STD, OnlineTrainer
 
-    trainer = SimpleNamespace(_warned_constant_critic=False, progress=SimpleNamespace(step=700))
+    def trainer(scale: str) -> SimpleNamespace:
+        config = SimpleNamespace(critic_output_scale=scale)
+        return SimpleNamespace(
+            _warned_constant_critic=False,
+            progress=SimpleNamespace(step=700),
+            policy=SimpleNamespace(config=config),
+        )
+
     warn = OnlineTrainer._warn_if_critic_is_constant
+    paper = trainer("paper")
     with caplog.at_level(logging.WARNING):
-        warn(trainer, {"q_mean": 1.8, "q_std": CONSTANT_Q_STD})
-        warn(trainer, {"q_mean": 1.8})
+        warn(paper, {"q_mean": 1.8, "q_std": CONSTANT_Q_STD})
+        warn(paper, {"q_mean": 1.8})
         assert not caplog.records
-        warn(trainer, {"q_mean": 1.8, "q_std": 2e-6})
-        warn(trainer, {"q_mean": 1.8, "q_std": 1e-6})
+        warn(paper, {"q_mean": 1.8, "q_std": 2e-6})
+        warn(paper, {"q_mean": 1.8, "q_std": 1e-6})
     assert len(caplog.records) == 1
     assert "step 700" in caplog.text and "--policy.critic_output_scale=return" in caplog.text
+    # Already return-scaled: the advice is not the setting in use.
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        warn(trainer("return"), {"q_mean": 1.8, "q_std": 1e-6})
+    assert "already return-scaled" in caplog.text and "rerun with" not in caplog.text
 
 
 def test_sigterm_with_env_worker_processes_stops_cleanly(tmp_path):

@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Cost of the content hashes (lerobot_indicator/data/integrity.py) -> docs/results/frame_integrity.json.
 
-    MUJOCO_GL=egl python -m benchmarks.speed.run_frame_integrity --episodes=20 --size=64
+    MUJOCO_GL=egl python -m benchmarks.speed.run_frame_integrity --episodes=20 --size=64 --rounds=2 \
+        --train_steps=20 --train_batch_size=64 --train_rounds=3
 
 Recording: ``record()`` of ``--episodes`` RGB-D reach episodes (PNG/TIFF frames and lossless video), with the
 hashes and with ``updated_hashes`` replaced by a stub (no file read, no hash), in interleaved rounds; besides
@@ -10,6 +11,10 @@ shared machine's load does not blur). Loading: on each hashed dataset, the once-
 run (``check_dataset``: hashes, shapes, video headers) with and without the hash file, the hash
 verification alone (``verify_hashes``), against the
 ``LeRobotDataset`` construction and ``__getitem__`` samples/s (``benchmarks.speed.dataset_loading``).
+``lerobot-train``: on the hashed video dataset, the README's RGB-D command (pyav, 3 forked workers, one decoder
+and one torch thread) for ``--train_steps`` steps of ``--train_batch_size``, with the check and with the plugin's
+check left out (the same process otherwise), in interleaved rounds: samples/s over each process's wall time
+(start-up included, where the check runs) and the seconds ``make_train_eval_datasets`` took in each.
 """
 
 import argparse
@@ -17,6 +22,8 @@ import json
 import os
 import shutil
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -57,6 +64,56 @@ def record_timed(root: Path, episodes: int, size: int, use_videos: bool, hashing
     return {"seconds": seconds, "frames_per_s": frames / seconds, "hash_seconds": spent[0], "frames": frames}
 
 
+# lerobot-train as its console script runs it, the plugin imported first; argv[1] "check" keeps the plugin's dataset
+# check, "no_check" marks make_train_eval_datasets as checked so the plugin leaves it alone. Prints how long
+# make_train_eval_datasets (check included) took.
+TRAIN_CHILD = """
+import functools, sys, time
+from lerobot.scripts import lerobot_train as script
+if sys.argv.pop(1) == "no_check":
+    script.make_train_eval_datasets.checks_integrity = True
+import lerobot_policy_indicator_ddpg
+make = script.make_train_eval_datasets
+@functools.wraps(make)
+def timed(cfg):
+    t0 = time.perf_counter()
+    try:
+        return make(cfg)
+    finally:
+        print(f"DATASETS_S={time.perf_counter() - t0}", flush=True)
+script.make_train_eval_datasets = timed
+sys.argv[0] = "lerobot-train"
+script.main()
+"""
+# The README's RGB-D lerobot-train environment.
+TRAIN_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "MALLOC_MMAP_MAX_": "0",
+    "MALLOC_TRIM_THRESHOLD_": "2147483647",
+    "LEROBOT_INDICATOR_VIDEO_DECODER_THREADS": "1",
+    "HF_HUB_OFFLINE": "1",
+    "CUDA_VISIBLE_DEVICES": "",
+}
+
+
+def lerobot_train_timed(root: Path, out: Path, check: bool, steps: int, batch_size: int) -> dict:
+    """One ``lerobot-train`` process on the dataset at ``root``: wall seconds, samples/s over them, and the
+    seconds of ``make_train_eval_datasets``."""
+    args = [f"--dataset.repo_id={REPO}", f"--dataset.root={root}", "--dataset.video_backend=pyav",
+            "--num_workers=3", "--dataloader_multiprocessing_context=fork", f"--batch_size={batch_size}",
+            f"--steps={steps}", "--policy.type=indicator_ddpg", "--policy.push_to_hub=false",
+            "--policy.device=cpu", "--save_checkpoint=false", "--wandb.enable=false", f"--log_freq={steps}",
+            f"--output_dir={out}"]  # fmt: skip
+    cmd = [sys.executable, "-c", TRAIN_CHILD, "check" if check else "no_check", *args]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, **TRAIN_ENV})
+    seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"lerobot-train failed: {proc.stderr[-3000:]}")
+    datasets_s = float(next(x for x in proc.stdout.splitlines() if x.startswith("DATASETS_S=")).split("=")[1])
+    return {"seconds": seconds, "samples_per_s": steps * batch_size / seconds, "make_datasets_s": datasets_s}
+
+
 def median_seconds(call, rounds: int = 3) -> float:
     times = []
     for _ in range(rounds):
@@ -74,6 +131,9 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--samples", type=int, default=50)  # __getitem__ calls per timing round
+    parser.add_argument("--train_steps", type=int, default=20)  # lerobot-train steps per process
+    parser.add_argument("--train_batch_size", type=int, default=64)
+    parser.add_argument("--train_rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=OUT)
     args = parser.parse_args()
     result = {
@@ -135,6 +195,33 @@ def main() -> None:
                 "check_with_hashes_in_getitem_samples": check_hashed_s * samples_per_s,
             }
             print(storage, json.dumps(result["loading"][storage]), flush=True)
+        runs = {"check": [], "no_check": []}
+        for r in range(args.train_rounds):
+            for arm in ("check", "no_check") if r % 2 == 0 else ("no_check", "check"):
+                out = Path(tmp) / f"train_{arm}_{r}"
+                run = lerobot_train_timed(
+                    kept["video"], out, arm == "check", args.train_steps, args.train_batch_size
+                )
+                runs[arm].append(run)
+                shutil.rmtree(out, ignore_errors=True)
+                print("lerobot-train", arm, json.dumps(run), flush=True)
+        ratios = [
+            c["samples_per_s"] / n["samples_per_s"]
+            for c, n in zip(runs["check"], runs["no_check"], strict=True)
+        ]
+        check_s = statistics.median(run["make_datasets_s"] for run in runs["check"]) - statistics.median(
+            run["make_datasets_s"] for run in runs["no_check"]
+        )
+        result["lerobot_train"] = {
+            "dataset": "video",
+            "steps": args.train_steps,
+            "batch_size": args.train_batch_size,
+            "runs": runs,
+            "checked_over_unchecked_samples_per_s_per_round": ratios,
+            "checked_over_unchecked_samples_per_s": statistics.median(ratios),
+            "check_s": check_s,
+            "check_share_of_run": check_s / statistics.median(run["seconds"] for run in runs["check"]),
+        }
     result["load_average_1_5_15_min_after"] = os.getloadavg()
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result, indent=1))

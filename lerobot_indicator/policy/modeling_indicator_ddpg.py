@@ -19,7 +19,7 @@ from lerobot_indicator.keys import goal_key, is_goal_key
 from lerobot_indicator.policy import indicator_core
 from lerobot_indicator.policy.configuration_indicator_ddpg import LEARNED_REWARDS, IndicatorDDPGConfig
 from lerobot_indicator.policy.goal_observations import GoalObservations
-from lerobot_indicator.policy.input_checks import check_policy_inputs
+from lerobot_indicator.policy.input_checks import PolicyInputError, check_policy_inputs, policy_env_options
 from lerobot_indicator.policy.learned_reward import LearnedReward
 from lerobot_indicator.policy.networks_indicator_ddpg import Actor, Critic
 
@@ -127,12 +127,14 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         inputs = self.config.observation_keys + self.config.goal_keys + context
         missing = [k for k in inputs if k not in batch]
         if missing:
+            # What lerobot-eval / lerobot-rollout first hand the policy: one line (the plugin's excepthook) with
+            # the fix, not a KeyError traceback from inside the rollout.
             hint = (
-                "; goals at deployment: --policy.goal_path (docs/own_data.md)"
+                "goals at deployment: --policy.goal_path (docs/own_data.md)"
                 if is_goal_key(missing[0])
-                else ""
+                else f"{policy_env_options(self.config)} (this plugin's envs), or an env or robot that gives them"
             )
-            raise KeyError(f"batch lacks the policy inputs {missing} (has {sorted(batch)}){hint}")
+            raise MissingInputError(f"batch lacks the policy inputs {missing} (has {sorted(batch)}); {hint}")
         for key in inputs:
             check_input_shape(key, batch[key], tuple(self.config.input_features[key].shape))
         obs = {k: batch[k] for k in self.config.observation_keys + context}
@@ -181,8 +183,14 @@ class IndicatorDDPGPolicy(PreTrainedPolicy):
         return torch.where((use_random < random_eps)[:, None], rand_action, action)
 
 
-class InputShapeError(ValueError):
+class InputShapeError(PolicyInputError):
     """A policy input whose shape is not the one the policy was made for."""
+
+
+class MissingInputError(PolicyInputError, KeyError):
+    """A policy input the batch lacks (a ``KeyError`` whose message is printed unquoted)."""
+
+    __str__ = PolicyInputError.__str__
 
 
 def check_input_shape(key: str, value: Tensor, feature_shape: tuple[int, ...]) -> None:
@@ -199,7 +207,8 @@ def check_input_shape(key: str, value: Tensor, feature_shape: tuple[int, ...]) -
         raise InputShapeError(
             f"{key}: the policy was made for {feature_shape[1]}x{feature_shape[2]} (HxW) images, got "
             f"{actual[2]}x{actual[3]} (batch shape {actual}, expected {expected}); use an env or dataset of "
-            "that image size"
+            f"that image size (this plugin's envs: --env.camera.height={feature_shape[1]} "
+            f"--env.camera.width={feature_shape[2]})"
         )
     stacked = (
         " (a time-stacked batch? select_action takes one frame per key)"

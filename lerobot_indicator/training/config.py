@@ -14,6 +14,7 @@ from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.hub import HubMixin
 
 from lerobot_indicator.io_errors import ConfigError
+from lerobot_indicator.training.offline_check import OfflineCheckConfig
 
 TRAIN_CONFIG_NAME = "train_config.json"
 INPUT_STATS = ("running", "first_cycle")
@@ -39,6 +40,9 @@ class OnlineConfig:
     warmup_episodes: int = 0
     # Evaluation episodes (deterministic actor) every env_eval_freq steps.
     eval_episodes: int = 20
+    # Of those, how many each evaluation writes as MP4 (<output_dir>/eval/videos_step_<step>/): the RGB
+    # observation beside its goal, upscaled to >= 256 px (policies comparing RGB images only).
+    eval_videos: int = 1
     # Input normalisation of a policy trained from scratch: "running" = mean/std of every episode in the
     # replay buffer (frames and goals), refreshed each cycle, as baselines' HER; "first_cycle" = frozen
     # after the first cycle (a few episodes' narrow stats clip goals outside their range, so the networks
@@ -72,6 +76,8 @@ class OnlineTrainConfig(HubMixin):
     dataset: DatasetConfig | None = None
     online: OnlineConfig = field(default_factory=OnlineConfig)
     record: OnlineRecordConfig = field(default_factory=OnlineRecordConfig)
+    # With --dataset.*: the offline check (training/offline_check.py) on held-out episodes, at each evaluation.
+    offline_check: OfflineCheckConfig = field(default_factory=OfflineCheckConfig)
     output_dir: Path | None = None
     job_name: str | None = None
     resume: bool = False
@@ -113,6 +119,8 @@ class OnlineTrainConfig(HubMixin):
         for name in ("n_envs", "updates_per_cycle", "eval_episodes"):
             if getattr(o, name) < 1:
                 raise ValueError(f"--online.{name} must be >= 1, got {getattr(o, name)}")
+        if o.eval_videos < 0:
+            raise ValueError(f"--online.eval_videos must be >= 0, got {o.eval_videos}")
         if o.episodes_per_cycle < 0 or (o.episodes_per_cycle == 0 and self.dataset is None):
             raise ValueError(
                 f"--online.episodes_per_cycle must be >= 1, or 0 with a --dataset.* to train on offline only, "

@@ -47,8 +47,10 @@ from lerobot_indicator.stop_signals import exit_code, raise_interrupted
 from lerobot_indicator.training.batches import to_transition_batch
 from lerobot_indicator.training.config import OnlineTrainConfig
 from lerobot_indicator.training.dataset_seed import seed_buffer
+from lerobot_indicator.training.eval_videos import write_eval_videos
 from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
 from lerobot_indicator.training.hub_push import PolicyPushError, push_policy
+from lerobot_indicator.training.offline_check import check_policy, trainer_check_episodes, trainer_metrics
 from lerobot_indicator.training.plots import plot_learning_curve
 from lerobot_indicator.training.recording import RolloutRecorder
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
@@ -147,6 +149,14 @@ class OnlineTrainer:
     def train(self) -> dict[str, float]:
         """Paper Algorithm 1, one cycle per iteration."""
         self._start()
+        o, p = self.cfg.online, self.progress
+        if p.step < self.cfg.steps:  # the first cycle's collection is what the first seconds are spent on
+            warmup = " warm-up (uniformly random actions)" if p.episodes < o.warmup_episodes else ""
+            logging.info(
+                "cycle %d: collecting %d%s episode(s) of %d steps with %d env(s), then %d updates of batch %d",
+                p.cycle, self.episodes_per_cycle, warmup, self.horizon, o.n_envs,
+                min(o.updates_per_cycle, self.cfg.steps - p.step), self.batch_size,
+            )  # fmt: skip
         bar = tqdm(
             total=self.cfg.steps, initial=self.progress.step, desc="indicator_ddpg online", unit="step"
         )
@@ -282,6 +292,10 @@ class OnlineTrainer:
         success = np.concatenate([r.success for r in results])[:n_eval]
         dist = np.concatenate([r.final_distance for r in results])[:n_eval]
         metrics = {"eval_success_rate": float(success.mean()), "eval_final_distance": float(np.nanmean(dist))}
+        if self.cfg.online.eval_videos:
+            videos = self.out / "eval" / f"videos_step_{self.progress.step}"
+            fps = int(getattr(self.cfg.env, "fps", None) or 20)
+            write_eval_videos(results, self.keys, videos, self.cfg.online.eval_videos, fps)
         self._phase_end(self.hooks.on_eval_end, t0, metrics)
         return metrics
 
@@ -307,6 +321,11 @@ class OnlineTrainer:
         if due(cfg.env_eval_freq):
             self._last_eval = self.evaluate()
             record.update(self._last_eval)
+            if self._offline_check is not None:  # --dataset.*: what was learned, on held-out episodes
+                episodes, held_out = self._offline_check
+                o = cfg.offline_check
+                result = check_policy(self.policy, episodes, offsets=o.offsets, near_offsets=o.near_offsets)
+                record.update(trainer_metrics(result, held_out))
         self.progress.cycle += 1
         self.progress.wall_time_s += time.perf_counter() - t0
         record["wall_time_s"] = self.progress.wall_time_s
@@ -339,6 +358,10 @@ class OnlineTrainer:
                 self.progress.seeded_episodes = self.progress.episodes = seed()
                 if self.progress.own_input_stats:
                     self.policy.set_observation_stats(self.buffer.observation_stats())
+        self._offline_check = None
+        if cfg.dataset is not None and cfg.offline_check.enable:
+            inputs = [*self.keys, *(self.context_keys or [])]
+            self._offline_check = trainer_check_episodes(cfg.dataset, cfg.offline_check, inputs)
         self.persistence.start(self.progress)
         self._last_eval: dict[str, float] = {}
         self._warned_constant_critic = False

@@ -119,3 +119,99 @@ def test_our_learners_are_the_package_presets(tmp_path):
         assert cfg.steps == 500 * 40 // (2 * 25) and cfg.env_eval_freq == 250 * 40 // (2 * 25)
     with pytest.raises(ValueError, match=r"multiples of one cycle \(50 env steps\)"):
         vs_sb3.Settings(eval_every=260).validate()
+
+
+def test_fetch_reach_task_runs_our_env_and_sb3_on_fetchreach_v4(tmp_path):
+    from benchmarks.experiments import vs_sb3
+
+    s = vs_sb3.Settings(task="fetch_reach_state", env_steps=1000, eval_every=200)
+    s.validate()
+    assert s.horizon == 50 and s.steps() == 1000 * 40 // (2 * 50)
+    for learner in vs_sb3.OURS:
+        cfg = vs_sb3.ours_config(learner, 0, s, tmp_path / learner, s.steps())
+        assert (cfg.env.type, cfg.env.obs_type, cfg.env.episode_length, cfg.env.epsilon) == (
+            "fetch_reach",
+            "state",
+            50,
+            0.05,
+        )
+        assert cfg.policy.observation_keys == ["observation.state"]
+        assert cfg.policy.context_keys == ["observation.environment_state"]
+        assert cfg.env_eval_freq == 200 * 40 // (2 * 50)
+    with pytest.raises(ValueError, match=r"multiples of one cycle \(100 env steps\)"):
+        vs_sb3.Settings(task="fetch_reach_state", eval_every=250).validate()
+    with pytest.raises(ValueError, match="choose from"):
+        vs_sb3.Settings(task="fetch_slide_state").validate()
+
+
+def test_sb3_on_fetchreach_v4_uses_its_own_reward_and_our_eval_protocol():
+    pytest.importorskip("stable_baselines3")
+    from benchmarks.experiments import vs_sb3
+
+    s = vs_sb3.Settings(task="fetch_reach_state", episodes_per_cycle=1, updates_per_cycle=2, batch_size=16)
+    model = vs_sb3.make_sb3(0, s)
+    env = model.get_env().envs[0].unwrapped
+    assert env.spec.id == "FetchReach-v4" and model.gamma == 1 - 1 / 50
+    model.learn(total_timesteps=100)  # two episodes
+    assert model.num_timesteps == 100 and model._n_updates == 4
+    # HER's relabeled rewards come from FetchReach-v4's own compute_reward: 0 within 0.05 m, else -1.
+    samples = model.replay_buffer.sample(64)
+    achieved = samples.next_observations["achieved_goal"].numpy()
+    desired = samples.observations["desired_goal"].numpy()
+    distance = np.linalg.norm(achieved - desired, axis=-1)
+    np.testing.assert_array_equal(samples.rewards.numpy()[:, 0], -(distance > 0.05).astype(np.float32))
+    result = vs_sb3.evaluate_sb3(model, vs_sb3.make_sb3_env(s), 2, s.horizon)
+    assert 0 <= result["eval_success_rate"] <= 1 and result["eval_final_distance"] > 0
+
+
+def test_ratios_of_env_steps_to_90():
+    from benchmarks.experiments import vs_sb3
+
+    def run(method, seed, successes):
+        curve = [{"env_steps": 100 * (i + 1), "eval_success_rate": x} for i, x in enumerate(successes)]
+        hit = next((c["env_steps"] for c in curve if c["eval_success_rate"] >= 0.9), None)
+        return {"method": method, "seed": seed, "curve": curve, "summary": {"env_steps_to_90": hit}}
+
+    runs = [
+        run("sb3_ddpg_her", 0, [0.0, 0.5, 0.9, 1.0]),
+        run("sb3_ddpg_her", 1, [0.0, 0.9, 1.0, 1.0]),
+        run("ours_indicator", 0, [0.9, 1.0, 1.0, 1.0]),
+        run("ours_indicator", 1, [0.5, 0.8, 1.0, 1.0]),
+        run("ours_oracle", 0, [0.0, 0.0, 0.0, 1.0]),
+        run("ours_oracle", 1, [0.0, 0.0, 0.0, 0.0]),  # never
+    ]
+    r = vs_sb3.ratios(runs, list(vs_sb3.LEARNERS))
+    # mean curves: SB3 0, 0.7, 0.95 -> 300; ours indicator 0.7, 0.9 -> 200; oracle 0.5 at most -> never
+    assert r["env_steps_to_90_mean_curve"] == {
+        "sb3_ddpg_her": 300,
+        "ours_oracle": None,
+        "ours_indicator": 200,
+    }
+    ind = r["ours_indicator_over_sb3"]
+    assert ind["mean_curve"] == pytest.approx(200 / 300)
+    assert ind["mean_of_seeds"] == pytest.approx(((100 + 300) / 2) / ((300 + 200) / 2))
+    assert ind["per_seed"] == {0: pytest.approx(100 / 300), 1: pytest.approx(300 / 200)}
+    assert r["ours_oracle_over_sb3"]["mean_curve"] is None
+    assert r["ours_oracle_over_sb3"]["mean_of_seeds"] is None  # a seed never reached it
+
+
+def test_sb3_with_normalised_inputs_stores_raw_goals_and_evaluates_normalised():
+    pytest.importorskip("stable_baselines3")
+    from benchmarks.experiments import vs_sb3
+
+    s = vs_sb3.Settings(task="fetch_reach_state", episodes_per_cycle=1, updates_per_cycle=2, batch_size=16)
+    model = vs_sb3.make_sb3(0, s, normalize=True)
+    normalizer = model.get_vec_normalize_env()
+    assert normalizer is not None and normalizer.clip_obs == 5.0 and not normalizer.norm_reward
+    model.learn(total_timesteps=100)
+    # HER relabels with raw goals (the buffer keeps raw observations): rewards follow the raw distance.
+    raw = model.replay_buffer.observations["achieved_goal"][:100, 0]
+    assert 1.0 < raw[:, 0].mean() < 1.6  # FetchReach's world x (m) around the table, not z-scores
+    samples = model.replay_buffer.sample(64, env=None)
+    distance = np.linalg.norm(
+        samples.next_observations["achieved_goal"].numpy() - samples.observations["desired_goal"].numpy(),
+        axis=-1,
+    )
+    np.testing.assert_array_equal(samples.rewards.numpy()[:, 0], -(distance > 0.05).astype(np.float32))
+    result = vs_sb3.evaluate_sb3(model, vs_sb3.make_sb3_env(s), 1, s.horizon)
+    assert result["eval_success_rate"] in (0.0, 1.0)

@@ -1,9 +1,14 @@
-"""Side-by-side benchmark: Stable-Baselines3 DDPG + HER vs our online trainer on the state-based Sawyer reach.
+"""Side-by-side benchmark: Stable-Baselines3 DDPG + HER vs our online trainer on a state-based goal task.
 
-The learners, protocol and timing are ``benchmarks.experiments.vs_sb3``'s; this CLI picks seeds, budget
-and output. Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``).
+The learners, protocol and timing are ``benchmarks.experiments.vs_sb3``'s; this CLI picks the task
+(``--task reach_state``: the Sawyer reach, the default; ``--task fetch_reach_state``: gymnasium-robotics'
+``FetchReach-v4`` for SB3, ``--env.type=fetch_reach --env.obs_type=state`` for ours), seeds, budget and output.
+Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``).
 
-    python -m benchmarks.experiments.run_vs_sb3 [--seeds 0 1 2] [--env-steps 5000] [--eval-every 250] [--threads 1]
+    python -m benchmarks.experiments.run_vs_sb3 [--task reach_state] [--seeds 0 1 2] [--env-steps 5000] \
+        [--eval-every 250] [--threads 1]
+    python -m benchmarks.experiments.run_vs_sb3 --task fetch_reach_state --env-steps 5000 --eval-every 200 \
+        --out-dir docs/results/gym_tasks/fetch_reach_state
 """
 
 import argparse
@@ -11,18 +16,20 @@ import dataclasses
 import json
 from pathlib import Path
 
-from benchmarks.experiments.vs_sb3 import LEARNERS, Settings, run_benchmark
+from benchmarks.experiments.vs_sb3 import ALL_LEARNERS, LEARNERS, VS_TASKS, Settings, run_benchmark
 from benchmarks.records import command_line
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--methods", nargs="+", default=list(LEARNERS), choices=LEARNERS)
+    p.add_argument("--methods", nargs="+", default=list(LEARNERS), choices=ALL_LEARNERS)
     for f in dataclasses.fields(Settings):
         flag = "--" + f.name.replace("_", "-")
         if f.type == "bool":
             p.add_argument(flag, action="store_true")
+        elif f.name == "task":
+            p.add_argument(flag, default=f.default, choices=list(VS_TASKS))
         else:
             p.add_argument(flag, type={"int": int, "float": float}[f.type], default=f.default)
     p.add_argument("--skip-training", action="store_true", help="only the update-throughput benchmark")

@@ -1,17 +1,21 @@
-"""Side by side: Stable-Baselines3 DDPG + HER and our online trainer on the state-based Sawyer reach.
+"""Side by side: Stable-Baselines3 DDPG + HER and our online trainer on a state-based goal task.
 
-Three learners, same simulator, same hyper-parameters where both have them (3x256 tanh MLPs, batch 256,
-Adam lr 1e-3, gamma = 1 - 1/T = 0.96, target smoothing 0.98 (SB3 tau 0.02), one env, the same episodes and
-gradient steps per cycle, the same env-step budget):
+Tasks (``VS_TASKS``): the Sawyer reach (``reach_state``, T = 25) and gymnasium-robotics' FetchReach
+(``fetch_reach_state``, T = 50). Three learners, same simulator, same hyper-parameters where both have them
+(3x256 tanh MLPs, batch 256, Adam lr 1e-3, gamma = 1 - 1/T, target smoothing 0.98 (SB3 tau 0.02), one env,
+the same episodes and gradient steps per cycle, the same env-step budget):
 
-* ``sb3_ddpg_her``: SB3 ``DDPG`` + ``HerReplayBuffer`` (``future``, 4 sampled goals), ground-truth sparse
-  reward +1/-1 through ``GoalEnvAdapter.compute_reward`` (``lerobot_indicator/envs/goal_env_adapter.py``);
+* ``sb3_ddpg_her``: SB3 ``DDPG`` + ``HerReplayBuffer`` (``future``, 4 sampled goals) with the ground-truth
+  sparse reward: on the Sawyer reach +1/-1 through ``GoalEnvAdapter.compute_reward``
+  (``lerobot_indicator/envs/goal_env_adapter.py``); on FetchReach gymnasium-robotics' own ``FetchReach-v4``
+  and its own ``compute_reward`` (0/-1, distance < 0.05 m);
 * ``ours_oracle``: the ``oracle`` preset (``benchmarks.experiments.presets``: ground-truth reward, HER-style
-  relabeling);
+  relabeling), on the task preset's env (``--env.type=fetch_reach --env.obs_type=state`` for FetchReach);
 * ``ours_indicator``: the ``indicator_balance_filter`` preset (no ground truth).
 
 Evaluation is the same for all: the deterministic actor on the N fixed eval episodes of our trainer
-(``reset(seed=EVAL_SEED_OFFSET + i)``), success = ground-truth distance <= epsilon at the last step. Our
+(``reset(seed=EVAL_SEED_OFFSET + i)``), success = ground-truth distance <= epsilon at the last step
+(``FetchReach-v4``: its own ``is_success``, distance < 0.05 m, at the last step). Our
 runs are timed through ``TrainerHooks``; wall-clock excludes evaluation. Update throughput is measured in
 one process on equally filled buffers, blocks interleaved with the order of the arms rotating.
 """
@@ -25,7 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -38,9 +42,7 @@ from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
 from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
 
 # What differs between the SB3 and our learners beyond the shared hyper-parameters (each library's defaults).
-PROTOCOL_DIFFERENCES = [
-    "inputs: SB3 concatenates observation, achieved_goal (== observation) and desired_goal (9-d); ours "
-    "observation and goal (6-d)",
+COMMON_DIFFERENCES = [
     "exploration: SB3 Gaussian noise std 0.2; ours Gaussian 0.2 plus a uniform random action with p=0.3 "
     "(baselines' HER)",
     "losses: ours adds action_l2=1 on the actor output and clips TD targets to [R-/(1-gamma), R+/(1-gamma)], "
@@ -55,9 +57,55 @@ PROTOCOL_DIFFERENCES = [
 # Our learners: the package's method presets.
 OURS = {"ours_oracle": "oracle", "ours_indicator": "indicator_balance_filter"}
 LEARNERS = ("sb3_ddpg_her", *OURS)
-TASK = "reach_state"
-HORIZON = 25
+# SB3 with input normalisation (``VecNormalize`` of observation and goals, clipped to +-5, reward untouched): what
+# rl-baselines3-zoo's HER configs set for the Fetch tasks (``normalize: true``) and what ours does; asked for by
+# name (``--methods``), not part of the default run.
+SB3_VARIANTS = ("sb3_ddpg_her_norm",)
+SB3_LEARNERS = ("sb3_ddpg_her", *SB3_VARIANTS)
+ALL_LEARNERS = (*LEARNERS, *SB3_VARIANTS)
 SUCCESS_TARGET = 0.9
+FETCH_REACH_ID = "FetchReach-v4"
+
+
+@dataclass(frozen=True)
+class VsTask:
+    """One task of the comparison: our env (a ``TASKS`` preset's env flags) and SB3's env on the same simulator."""
+
+    horizon: int
+    title: str
+    sb3_env_id: str | None  # None: our env through GoalEnvAdapter; else a gymnasium id with its own reward
+    differences: list[str] = field(default_factory=list)
+
+
+VS_TASKS = {
+    "reach_state": VsTask(
+        25,
+        "Sawyer reach (state)",
+        None,
+        [
+            "inputs: SB3 concatenates observation, achieved_goal (== observation) and desired_goal (9-d); ours "
+            "observation and goal (6-d)",
+            "reward: both ground truth +1/-1 within epsilon (SB3 through GoalEnvAdapter.compute_reward)",
+        ],
+    ),
+    "fetch_reach_state": VsTask(
+        50,
+        "FetchReach (state)",
+        FETCH_REACH_ID,
+        [
+            "env: SB3 runs gymnasium-robotics' FetchReach-v4 itself (its 4-d action, the gripper blocked); ours "
+            "the same simulator through --env.type=fetch_reach (3-d action: the 4th is 0), whose start is redrawn "
+            "when already within epsilon of the goal and whose goal is where the gripper settles when driven "
+            "there (within a few mm of FetchReach-v4's sampled goal)",
+            "inputs: SB3 FetchReach-v4's observation (10), achieved_goal (3), desired_goal (3), 16-d; ours the grip "
+            "point (3, compared), its goal (3) and the wrapped observation as context (10), 16-d",
+            "reward: SB3 FetchReach-v4's own compute_reward, 0 if distance < 0.05 m else -1; ours oracle +1/-1 "
+            "(distance <= 0.05 m); ours indicator: +1 only when the grip point equals its goal bit for bit",
+            "evaluation: the same seeds EVAL_SEED_OFFSET + i, but each env draws its own goals from them (the same "
+            "distribution: FetchReach-v4's reset); success at the last step (SB3: FetchReach-v4's is_success)",
+        ],
+    ),
+}
 
 
 @dataclass
@@ -77,9 +125,16 @@ class Settings:
     fill_episodes: int = 40  # update benchmark: episodes in the buffers
     updates_per_block: int = 50
     update_blocks: int = 6
+    task: str = "reach_state"  # a key of VS_TASKS (and of presets.TASKS: our env flags)
+
+    @property
+    def horizon(self) -> int:
+        return VS_TASKS[self.task].horizon
 
     def validate(self) -> None:
-        cycle_steps = self.episodes_per_cycle * HORIZON
+        if self.task not in VS_TASKS:
+            raise ValueError(f"task {self.task!r}: choose from {list(VS_TASKS)}")
+        cycle_steps = self.episodes_per_cycle * self.horizon
         if self.eval_every % cycle_steps or self.env_steps % cycle_steps:
             raise ValueError(
                 f"eval_every ({self.eval_every}) and env_steps ({self.env_steps}) must be multiples of one "
@@ -88,31 +143,62 @@ class Settings:
 
     def steps(self) -> int:
         """Our optimisation steps for the env-step budget."""
-        return self.env_steps * self.updates_per_cycle // (self.episodes_per_cycle * HORIZON)
+        return self.env_steps * self.updates_per_cycle // (self.episodes_per_cycle * self.horizon)
 
 
 # ----------------------------------------------------------------------------------------------------------
 # SB3 side
 # ----------------------------------------------------------------------------------------------------------
-def make_sb3(seed: int, s: Settings, learning_starts: int = 0):
+def make_sb3_env(s: Settings):
+    """SB3's env: our state env as a GoalEnv (``GoalEnvAdapter``) or the task's gymnasium id, e.g.
+    ``FetchReach-v4`` with its own ground-truth ``compute_reward``."""
+    env_id = VS_TASKS[s.task].sb3_env_id
+    if env_id is None:
+        from lerobot_indicator.envs.goal_env_adapter import make_goal_env
+
+        return make_goal_env()
+    import gymnasium as gym
+    import gymnasium_robotics
+
+    gym.register_envs(gymnasium_robotics)
+    env = gym.make(env_id)
+    if env.spec.max_episode_steps != s.horizon:
+        raise ValueError(
+            f"{env_id}: {env.spec.max_episode_steps} steps per episode, the task's T is {s.horizon}"
+        )
+    return env
+
+
+def make_sb3(seed: int, s: Settings, learning_starts: int = 0, normalize: bool = False):
+    """SB3 DDPG + HER; ``normalize``: through ``VecNormalize`` (observation and goals, clipped to +-5; the
+    replay buffer keeps raw observations, so HER's relabeled rewards use raw goals)."""
     from stable_baselines3 import DDPG, HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     from torch import nn
 
-    from lerobot_indicator.envs.goal_env_adapter import make_goal_env
-
+    env = make_sb3_env(s)
+    n_actions = env.action_space.shape[0]
+    if normalize:
+        env = VecNormalize(
+            DummyVecEnv([lambda: env]),
+            norm_obs=True,
+            norm_reward=False,
+            clip_obs=5.0,
+            gamma=1 - 1 / s.horizon,
+        )
     return DDPG(
         "MultiInputPolicy",
-        make_goal_env(),
+        env,
         learning_rate=s.lr,
         buffer_size=1_000_000,
         learning_starts=learning_starts,
         batch_size=s.batch_size,
         tau=0.02,
-        gamma=1 - 1 / HORIZON,
+        gamma=1 - 1 / s.horizon,
         train_freq=(s.episodes_per_cycle, "episode"),
         gradient_steps=s.updates_per_cycle,
-        action_noise=NormalActionNoise(np.zeros(3), s.noise * np.ones(3)),
+        action_noise=NormalActionNoise(np.zeros(n_actions), s.noise * np.ones(n_actions)),
         replay_buffer_class=HerReplayBuffer,
         replay_buffer_kwargs={"n_sampled_goal": 4, "goal_selection_strategy": "future"},
         policy_kwargs={"net_arch": [256, 256, 256], "activation_fn": nn.Tanh},
@@ -122,35 +208,40 @@ def make_sb3(seed: int, s: Settings, learning_starts: int = 0):
     )
 
 
-def evaluate_sb3(model, env, n_episodes: int) -> dict[str, float]:
-    """Our trainer's evaluation protocol: seeds EVAL_SEED_OFFSET + i, deterministic actor, success at step T."""
+def evaluate_sb3(model, env, n_episodes: int, horizon: int) -> dict[str, float]:
+    """Our trainer's evaluation protocol: seeds EVAL_SEED_OFFSET + i, deterministic actor, success at step T.
+    The final distance is the env's ``gt_distance``, or (a gymnasium-robotics env) that of its achieved and
+    desired goals."""
     success, distance = [], []
+    normalizer = model.get_vec_normalize_env()  # frozen here: normalize_obs does not update its statistics
     for i in range(n_episodes):
         obs, info = env.reset(seed=EVAL_SEED_OFFSET + i)
-        for _ in range(HORIZON):
-            action, _ = model.predict(obs, deterministic=True)
+        for _ in range(horizon):
+            inputs = obs if normalizer is None else normalizer.normalize_obs(obs)
+            action, _ = model.predict(inputs, deterministic=True)
             obs, _, terminated, truncated, info = env.step(action)
         if not truncated:
             raise RuntimeError("an eval episode did not end at the horizon")
         success.append(bool(info["is_success"]))
-        distance.append(float(info[GT_DISTANCE]))
+        if GT_DISTANCE in info:
+            distance.append(float(info[GT_DISTANCE]))
+        else:
+            distance.append(float(np.linalg.norm(obs["achieved_goal"] - obs["desired_goal"])))
     return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
 
 
-def run_sb3(seed: int, s: Settings) -> dict:
+def run_sb3(seed: int, s: Settings, normalize: bool = False) -> dict:
     from stable_baselines3.common.callbacks import BaseCallback
 
-    from lerobot_indicator.envs.goal_env_adapter import make_goal_env
-
-    model = make_sb3(seed, s)
-    eval_env = make_goal_env()
+    model = make_sb3(seed, s, normalize=normalize)
+    eval_env = make_sb3_env(s)
     curve: list[dict] = []
     clock = {"eval": 0.0, "collect": 0.0, "rollout_t0": 0.0, "start": 0.0}
 
     def do_eval() -> None:
         t0 = time.perf_counter()
         train_wall = t0 - clock["start"] - clock["eval"]
-        result = evaluate_sb3(model, eval_env, s.eval_episodes)
+        result = evaluate_sb3(model, eval_env, s.eval_episodes, s.horizon)
         clock["eval"] += time.perf_counter() - t0
         curve.append(
             {
@@ -190,7 +281,7 @@ def run_sb3(seed: int, s: Settings) -> dict:
 def ours_cli(learner: str, seed: int, s: Settings, steps: int) -> list[str]:
     """``lerobot-indicator-train`` flags of one of our learners (without ``--output_dir``)."""
     return [
-        *TASKS[TASK].env_args,
+        *TASKS[s.task].env_args,
         "--policy.type=indicator_ddpg",
         "--policy.device=cpu",
         "--policy.push_to_hub=false",
@@ -206,7 +297,7 @@ def ours_cli(learner: str, seed: int, s: Settings, steps: int) -> list[str]:
         f"--online.eval_episodes={s.eval_episodes}",
         f"--steps={steps}",
         f"--policy.compile_model={str(s.compile).lower()}",
-        f"--env_eval_freq={s.eval_every * s.updates_per_cycle // (s.episodes_per_cycle * HORIZON)}",
+        f"--env_eval_freq={s.eval_every * s.updates_per_cycle // (s.episodes_per_cycle * s.horizon)}",
         "--save_checkpoint=false",
         f"--seed={seed}",
     ]
@@ -282,7 +373,10 @@ def run_ours(learner: str, seed: int, s: Settings) -> dict:
 def run_learner(learner: str, seed: int, s: Settings) -> dict:
     torch.set_num_threads(s.threads)
     t0 = time.perf_counter()
-    run = run_sb3(seed, s) if learner == "sb3_ddpg_her" else run_ours(learner, seed, s)
+    if learner in SB3_LEARNERS:
+        run = run_sb3(seed, s, normalize=learner == "sb3_ddpg_her_norm")
+    else:
+        run = run_ours(learner, seed, s)
     run["process_wall_s"] = time.perf_counter() - t0
     return run
 
@@ -368,7 +462,7 @@ def bench_updates(s: Settings) -> dict:
     reach: the headroom left once the matmuls dominate."""
     n = s.updates_per_block
     sb3 = make_sb3(0, s, learning_starts=10**9)
-    sb3.learn(total_timesteps=s.fill_episodes * HORIZON)  # random actions, no training
+    sb3.learn(total_timesteps=s.fill_episodes * s.horizon)  # random actions, no training
     results = {}
     for learner in ("ours_indicator", "ours_oracle"):
         times, flops = time_update_arms(learner, sb3, s)
@@ -445,6 +539,52 @@ def aggregate(runs: list[dict]) -> dict:
     return {k: stat(k) for k in keys}
 
 
+def first_mean_hit(runs: list[dict]) -> int | None:
+    """The first env steps at which the success rate averaged over ``runs`` (seeds) reaches ``SUCCESS_TARGET``
+    (on the evaluations all runs share): the experiments table's "first env steps with mean success >= 0.9"."""
+    n = min(len(r["curve"]) for r in runs)
+    steps = [c["env_steps"] for c in runs[0]["curve"][:n]]
+    for r in runs:
+        if [c["env_steps"] for c in r["curve"][:n]] != steps:
+            raise ValueError(
+                f"{r['method']} seed {r['seed']}: evaluated at other env steps than seed {runs[0]['seed']}"
+            )
+    mean = np.mean([[c["eval_success_rate"] for c in r["curve"][:n]] for r in runs], axis=0)
+    return next((x for x, m in zip(steps, mean, strict=True) if m >= SUCCESS_TARGET), None)
+
+
+def ratios(runs: list[dict], learners: list[str]) -> dict:
+    """Env steps to ``SUCCESS_TARGET`` of each of our learners over each SB3 learner's (``<ours>_over_sb3`` for
+    ``sb3_ddpg_her``, ``<ours>_over_<sb3 learner>`` for a variant): from the mean-over-seeds curves, as the mean
+    of the seeds' first hits (None unless every seed of both reached it) and seed by seed."""
+    by = {m: sorted((r for r in runs if r["method"] == m), key=lambda r: r["seed"]) for m in learners}
+    by = {m: rs for m, rs in by.items() if rs}
+    hits = {m: first_mean_hit(rs) for m, rs in by.items()}
+    out: dict = {"env_steps_to_90_mean_curve": hits}
+
+    def per_seed(rs: list[dict]) -> dict[int, int | None]:
+        return {r["seed"]: r["summary"]["env_steps_to_90"] for r in rs}
+
+    def mean_all(hits: dict[int, int | None]) -> float | None:
+        return float(np.mean(list(hits.values()))) if None not in hits.values() else None
+
+    for ref in (m for m in SB3_LEARNERS if m in by):
+        base, base_mean = per_seed(by[ref]), mean_all(per_seed(by[ref]))
+        suffix = "sb3" if ref == "sb3_ddpg_her" else ref
+        for m in (m for m in OURS if m in by):
+            mine = per_seed(by[m])
+            mean = mean_all(mine)
+            out[f"{m}_over_{suffix}"] = {
+                "mean_curve": hits[m] / hits[ref] if hits[m] and hits[ref] else None,
+                "mean_of_seeds": mean / base_mean if mean and base_mean else None,
+                "per_seed": {
+                    seed: (x / base[seed] if x and base.get(seed) else None) for seed, x in mine.items()
+                },
+                "env_steps_to_90_per_seed": {"ours": mine, "sb3": base},
+            }
+    return out
+
+
 def training_runs(seeds: list[int], learners: list[str], s: Settings) -> list[dict]:
     """Every (seed, learner) run in its own process, interleaved seed by seed so machine noise hits all
     learners alike."""
@@ -464,14 +604,20 @@ def plot(record: dict, png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.2))
-    colors = {"sb3_ddpg_her": "tab:gray", "ours_oracle": "tab:blue", "ours_indicator": "tab:red"}
+    fig, axes = plt.subplots(1, 4, figsize=(21, 4.4))
+    colors = {
+        "sb3_ddpg_her": "tab:gray",
+        "sb3_ddpg_her_norm": "black",
+        "ours_oracle": "tab:blue",
+        "ours_indicator": "tab:red",
+    }
     labels = {
         "sb3_ddpg_her": "SB3 DDPG+HER (GT reward)",
+        "sb3_ddpg_her_norm": "SB3 DDPG+HER, normalised inputs (GT reward)",
         "ours_oracle": "ours, oracle (GT reward)",
         "ours_indicator": "ours, indicator+balance+filter",
     }
-    for learner in LEARNERS:
+    for learner in ALL_LEARNERS:
         runs = [r for r in record["runs"] if r["method"] == learner]
         if not runs:
             continue
@@ -504,8 +650,31 @@ def plot(record: dict, png: Path) -> None:
     axes[2].set_title(f"batch {upd['batch_size']}, CPU, incl. replay sampling", fontsize=9)
     for i, v in enumerate(vals):
         axes[2].text(i, v, f"{v:.1f}", ha="center", va="bottom")
+    # Env steps to 90% success: each seed's first hit (x at the budget: never), the mean curve's first hit.
+    ax, budget = axes[3], record["env_steps_budget"]
+    hits = record.get("ratios", {}).get("env_steps_to_90_mean_curve", {})
+    drawn = [m for m in ALL_LEARNERS if any(r["method"] == m for r in record["runs"])]
+    for i, learner in enumerate(drawn):
+        seeds = [r["summary"]["env_steps_to_90"] for r in record["runs"] if r["method"] == learner]
+        reached = [x for x in seeds if x is not None]
+        if hits.get(learner) is not None:
+            ax.bar(i, hits[learner], color=colors[learner], alpha=0.6)
+            ax.text(i, hits[learner], f"{hits[learner]}", ha="center", va="bottom")
+        ax.scatter([i] * len(reached), reached, color="k", s=14, zorder=3)
+        ax.scatter(
+            [i] * (len(seeds) - len(reached)), [budget] * (len(seeds) - len(reached)), marker="x", color="k"
+        )
+    ax.set_xticks(range(len(drawn)), [labels[m].split(" (")[0] for m in drawn], fontsize=7)
+    ax.set_ylabel(f"env steps to {SUCCESS_TARGET:.0%} success")
+    ratio = record.get("ratios", {}).get("ours_indicator_over_sb3", {})
+    fmt = lambda x: "-" if x is None else f"{x:.2f}"  # noqa: E731
+    ax.set_title(
+        f"bar: mean-over-seeds curve, dots: seeds (x: never)\nours indicator / SB3: {fmt(ratio.get('mean_curve'))} "
+        f"(mean curve), {fmt(ratio.get('mean_of_seeds'))} (mean of seeds)",
+        fontsize=9,
+    )
     fig.suptitle(
-        f"Sawyer reach (state): SB3 {record['versions']['stable_baselines3']} vs lerobot-indicator, "
+        f"{VS_TASKS[record.get('task', 'reach_state')].title}: SB3 {record['versions']['stable_baselines3']} vs lerobot-indicator, "
         f"seeds {record['seeds']}, {record['env_steps_budget']} env steps, "
         f"torch threads {record['torch_threads']}"
     )
@@ -543,13 +712,15 @@ def run_benchmark(
         "env_steps_budget": s.env_steps,
         "settings": asdict(s)
         | {
-            "gamma": 1 - 1 / HORIZON,
+            "gamma": 1 - 1 / s.horizon,
             "target_smoothing": 0.98,
             "hidden": [256, 256, 256],
             "activation": "tanh",
         },
         "presets": {learner: METHODS[OURS[learner]] for learner in OURS},
-        "protocol_differences": PROTOCOL_DIFFERENCES,
+        "task": s.task,
+        "sb3_env": VS_TASKS[s.task].sb3_env_id or "lerobot_indicator GoalEnvAdapter(" + s.task + ")",
+        "protocol_differences": VS_TASKS[s.task].differences + COMMON_DIFFERENCES,
         "update_throughput": update_throughput,
         "summary": {m: aggregate([r for r in runs if r["method"] == m]) for m in learners} if runs else {},
         "runs": runs,
@@ -558,6 +729,7 @@ def run_benchmark(
         sb3 = record["summary"].get("sb3_ddpg_her", {}).get("env_steps_to_90", {}).get("mean")
         ind = record["summary"].get("ours_indicator", {}).get("env_steps_to_90", {}).get("mean")
         record["ratio_env_steps_to_90_indicator_over_sb3"] = ind / sb3 if sb3 and ind else None
+        record["ratios"] = ratios(runs, learners)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / ("vs_sb3.json" if runs else "vs_sb3_updates.json")).write_text(
         json.dumps(record, indent=2) + "\n"

@@ -477,6 +477,61 @@ def test_oracle_reward_is_r_plus_where_the_ground_truth_is_within_epsilon_of_the
     assert stats["reward_accuracy"].item() == 1.0
 
 
+@pytest.mark.parametrize(
+    ("fn_rate", "fp_rate", "expected_positive", "fn_seen", "fp_seen"),
+    [(1.0, 0.0, [False] * 5, 1.0, 0.0), (0.0, 1.0, [True] * 5, 0.0, 1.0)],
+)
+def test_oracle_reward_flipped_at_rate_one_turns_every_true_positive_or_negative(
+    fn_rate, fp_rate, expected_positive, fn_seen, fp_seen
+):
+    """The section-4 noisy oracle on the same batch: p_FN = 1 gives R- on all 5 rows (3 true positives
+    flipped, the 2 negatives kept), p_FP = 1 gives R+ on all; the logged rates see the flips."""
+    policy = make_policy(
+        reward="oracle",
+        oracle_epsilon=0.5,
+        positive_reward=2.0,
+        negative_reward=-0.5,
+        p_next=0.0,
+        p_future=0.0,
+        filter=False,
+        reward_false_negative_rate=fn_rate,
+        reward_false_positive_rate=fp_rate,
+    )
+    set_policy_weights(policy)
+    constant_critics(policy)
+    _, stats = loss_and_stats(policy, oracle_batch())
+    r = torch.where(torch.tensor(expected_positive), 2.0, -0.5)
+    close(stats["critic_loss"], ((0.3 - r) ** 2).mean())
+    assert stats["false_negative_rate"].item() == fn_seen
+    assert stats["false_positive_rate"].item() == fp_seen
+    assert stats["reward_accuracy"].item() == pytest.approx(
+        2 / 5 if fn_rate else 3 / 5
+    )  # right only on the unflipped class
+
+
+def test_flip_rewards_flips_each_class_at_its_own_rate_and_nothing_at_zero():
+    success = torch.arange(200_000) % 4 == 0  # 50,000 true positives, 150,000 true negatives
+    assert core.flip_rewards(success, 0.0, 0.0) is success
+    g = torch.Generator().manual_seed(3)
+    noisy = core.flip_rewards(success, 0.3, 0.05, g)
+    assert (~noisy[success]).float().mean().item() == pytest.approx(0.3, abs=0.006)
+    assert noisy[~success].float().mean().item() == pytest.approx(0.05, abs=0.002)
+    u = torch.rand(success.shape, generator=torch.Generator().manual_seed(3))
+    assert torch.equal(noisy, torch.where(success, u >= 0.3, u < 0.05))
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"reward_false_negative_rate": 0.1}, "reward_false_negative_rate=0.1 flips the ground-truth reward"),
+        ({"reward": "oracle", "reward_false_positive_rate": 1.5}, "must be in [0, 1], got 1.5"),
+    ],
+)
+def test_reward_noise_needs_the_oracle_and_a_probability(overrides, message):
+    with pytest.raises(Exception, match=re.escape(message)):
+        IndicatorDDPGConfig(**overrides)
+
+
 GT_MESSAGE = (
     "reward='oracle' needs ground truth in the batch: next.observation.gt_achieved_goal, "
     "future.observation.gt_achieved_goal, observation.gt_desired_goal"

@@ -129,6 +129,10 @@ class IndicatorDDPGConfig(PreTrainedConfig):
     positive_reward: float = 1.0
     # R-, the reward otherwise.
     negative_reward: float = -1.0
+    # reward="oracle" only: probability that a true R+ is given as R- (the paper's section-4 p_FN study).
+    reward_false_negative_rate: float = 0.0
+    # reward="oracle" only: probability that a true R- is given as R+ (the paper's section-4 p_FP study).
+    reward_false_positive_rate: float = 0.0
 
     # Relabeling (Algorithm 1)
     # Balanced relabeling: goal o_{t+1} with p_next, a future frame t' >= t+2 with p_future, else the recorded.
@@ -288,6 +292,12 @@ class IndicatorDDPGConfig(PreTrainedConfig):
             raise ValueError(
                 f"p_next={self.p_next}, p_future={self.p_future} are not probabilities summing <= 1"
             )
+        for name in ("reward_false_negative_rate", "reward_false_positive_rate"):
+            rate = getattr(self, name)
+            if not 0 <= rate <= 1:
+                raise ValueError(f"{name} must be in [0, 1], got {rate}")
+            if rate > 0 and self.reward != "oracle":
+                raise ValueError(f"{name}={rate} flips the ground-truth reward: it needs reward='oracle'")
         if self.reward in LEARNED_REWARDS and self.filter:
             raise ValueError(
                 f"filter=True drops R- transitions, but reward={self.reward!r} gives a continuous reward with no "

@@ -154,6 +154,22 @@ def ground_truth_success(gt_achieved_next: Tensor, gt_goal: Tensor, epsilon: flo
     return torch.linalg.vector_norm((gt_achieved_next - gt_goal).flatten(1), dim=1) <= epsilon
 
 
+def flip_rewards(
+    success: Tensor,
+    false_negative_rate: float,
+    false_positive_rate: float,
+    generator: torch.Generator | None = None,
+) -> Tensor:
+    """The paper's section-4 noisy reward (r_FN, r_FP): each true positive is given as negative with
+    probability ``false_negative_rate`` and each true negative as positive with ``false_positive_rate``, drawn
+    anew every time a reward is computed."""
+    if false_negative_rate == 0 and false_positive_rate == 0:
+        return success
+    gen_device = generator.device if generator is not None else success.device
+    u = torch.rand(success.shape, generator=generator, device=gen_device).to(success.device)
+    return torch.where(success, u >= false_negative_rate, u < false_positive_rate)
+
+
 def ground_truth_goal(batch: dict[str, Tensor], source: Tensor) -> Tensor | None:
     """Ground truth of the chosen goal: gt_achieved of o_{t+1} / o_{t'}, or gt_desired if recorded."""
     if not all(k in batch for k in (GT_NEXT_ACHIEVED, GT_FUTURE_ACHIEVED, GT_DESIRED)):
@@ -351,6 +367,9 @@ def indicator_ddpg_loss(
                 f"{GT_DESIRED}" + (f", {GT_PATH_ACHIEVED}" if config.n_step > 1 else "")
             )
         success = ground_truth_success(gt_achieved, gt_goal, config.oracle_epsilon)
+        success = flip_rewards(
+            success, config.reward_false_negative_rate, config.reward_false_positive_rate, generator
+        )
         return torch.where(success, config.positive_reward, config.negative_reward)
 
     reward = step_reward(next_obs, batch.get(GT_NEXT_ACHIEVED))  # r_{t+1}: the filter's and the stats'

@@ -177,6 +177,33 @@ def test_a_pretrained_policy_for_other_observations_is_refused_at_start_with_the
     assert not (tmp_path / "run").exists()  # refused before anything is built
 
 
+def test_a_state_policy_comparing_a_key_the_env_has_no_goal_for_is_told_which_keys_it_can_compare():
+    """Already obs_type=state, so "use --env.obs_type=state" would fix nothing: the hint names the keys the env
+    gives goals for (a goal-free dataset's state keys are all compared unless --policy.observation_keys says)."""
+    from lerobot.configs import FeatureType, PolicyFeature
+
+    from lerobot_indicator.envs import SawyerReachEnvConfig
+    from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
+    from lerobot_indicator.policy.input_checks import PolicyInputError, check_env_for_policy
+
+    vec = PolicyFeature(type=FeatureType.STATE, shape=(3,))
+    keys = ["observation.state", "observation.environment_state"]
+    cfg = IndicatorDDPGConfig(device="cpu", horizon=25, observation_keys=keys)
+    cfg.input_features = {k: vec for k in keys} | {
+        "observation.goal_state": vec,
+        "observation.goal_environment_state": vec,
+    }
+    cfg.output_features = {"action": PolicyFeature(type=FeatureType.ACTION, shape=(3,))}
+    with pytest.raises(PolicyInputError) as err:
+        check_env_for_policy(cfg, SawyerReachEnvConfig(obs_type="state"))
+    message = str(err.value)
+    assert "observation.environment_state" in message and "--env.obs_type" not in message
+    assert message.endswith(
+        "the env gives goals only for ['observation.state']: train the policy with "
+        "--policy.observation_keys=[observation.state]"
+    ), message
+
+
 def test_a_pretrained_policy_on_a_dataset_of_other_image_sizes_is_refused_when_made():
     """lerobot-train: make_policy gives the policy the dataset's metadata; a pretrained policy keeps its own
     input features, so the dataset's are checked against them."""

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from lerobot.configs import PolicyFeature
 
-from lerobot_indicator.keys import DEPTH_SUFFIX, goal_key
+from lerobot_indicator.keys import DEPTH_SUFFIX, goal_key, is_goal_key
 
 
 class PolicyInputError(ValueError):
@@ -87,9 +87,20 @@ def check_env_for_policy(config, env_cfg, what: str = "eval env") -> None:
 
     obs_type = getattr(env_cfg, "obs_type", None)
     source = f"{what} {env_cfg.type}" + (f" (obs_type={obs_type})" if obs_type else "")
-    check_policy_inputs(
-        config, features, source, env_input_fix(env_cfg, config) or policy_env_options(config)
-    )
+    fix = env_input_fix(env_cfg, config) or policy_env_options(config)
+    if (
+        obs_type and fix == f"use --env.obs_type={obs_type}"
+    ):  # already so: the env lacks a compared key's goal
+        with_goal = sorted(
+            k
+            for k in features
+            if k.startswith("observation.") and not is_goal_key(k) and goal_key(k) in features
+        )
+        fix = (
+            f"the env gives goals only for {with_goal}: train the policy with "
+            f"--policy.observation_keys=[{','.join(with_goal)}]"
+        )
+    check_policy_inputs(config, features, source, fix)
 
 
 def _env_checked(make_policy, train_cfg: dict):

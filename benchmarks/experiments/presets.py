@@ -121,8 +121,9 @@ for _m in LEARNED_REWARD_METHODS:
 for _m in ("oracle", "indicator_balance_filter_inverse_dynamics"):
     VARIANTS[f"{_m}_no_augmentation"] = [*(METHODS | VARIANTS)[_m], "--policy.augment_pad=0"]
 # The paper's section-4 study (Fig. 2): DDPG + relabeling (the Oracle arm) on state reach with its ground-truth
-# reward flipped at random, a true R+ to R- with p_FN or a true R- to R+ with p_FP.
-REWARD_NOISE = {"fn": (0.1, 0.3, 0.5, 0.7, 0.9), "fp": (0.01, 0.05, 0.1, 0.3)}
+# reward flipped at random, a true R+ to R- with p_FN or a true R- to R+ with p_FP; p_FP up to 0.9 to find
+# where uniform flips stop learning.
+REWARD_NOISE = {"fn": (0.1, 0.3, 0.5, 0.7, 0.9), "fp": (0.01, 0.05, 0.1, 0.3, 0.5, 0.7, 0.9)}
 NOISE_FLAGS = {"fn": "reward_false_negative_rate", "fp": "reward_false_positive_rate"}
 REWARD_NOISE_METHODS = {
     f"oracle_{kind}{rate:g}": [*METHODS["oracle"], f"--policy.{NOISE_FLAGS[kind]}={rate:g}"]
@@ -215,7 +216,7 @@ STYLES = {
 # The noise arms: one hue per kind (blue: false negatives, red: false positives), darker at higher rates.
 _NOISE_SHADES = {
     "fn": ("#9ecae1", "#6baed6", "#4292c6", "#2171b5", "#08306b"),
-    "fp": ("#fc9272", "#fb6a4a", "#de2d26", "#67000d"),
+    "fp": ("#fcbba1", "#fc9272", "#fb6a4a", "#ef3b2c", "#cb181d", "#a50f15", "#67000d"),
 }
 for _kind, _rates in REWARD_NOISE.items():
     for _rate, _colour in zip(_rates, _NOISE_SHADES[_kind], strict=True):

@@ -59,17 +59,17 @@ DEMOS: dict[str, DemoPreset] = {
         [
             # The policy's defaults with images (--policy.preset=auto: 3-step targets, the inverse-dynamics
             # loss, the return-scaled critic output) learn reach from pixels (docs/results/experiments_rgbd/);
-            # 8000 env steps: where Indicator+Balance+Filter with these defaults first reaches a mean of 0.9 over
-            # 3 seeds (docs/results/experiments_rgbd/defaults/); this demo's own run: docs/results/demo_rgbd.json.
+            # 10,000 env steps: this seed's evaluations reach 0.80 only at 8000 and 0.95-1.00 from 9000 on
+            # (docs/results/demo_rgbd.json), so the budget keeps a margin over the demo's 80% bar.
             # Both cores for the updates: the demo has the machine to itself (1 thread is the default because
             # concurrent runs on 2 cores are slower with 2 threads each; docs/results/policy_updates.json).
             "--cpu_threads=2",
-            "--steps=8000",
+            "--steps=10000",
             "--online.episodes_per_cycle=4",
             "--online.updates_per_cycle=100",
             "--online.eval_episodes=20",
             "--env_eval_freq=1000",
-            "--save_freq=8000",
+            "--save_freq=10000",
             "--seed=1",
         ],
         "indicator_ddpg on Sawyer reach from 64x64 RGB-D images",

@@ -456,9 +456,8 @@ def oracle_batch() -> dict[str, Tensor]:
     return batch
 
 
-def test_oracle_reward_is_r_plus_where_the_ground_truth_is_within_epsilon_of_the_goal():
-    """reward="oracle" (R+ = 2, R- = -0.5): r = R+ where ||s_{t+1} - s_g|| <= epsilon, whatever the frames;
-    with Q = 0.3 and Q' = 0, critic_loss = mean (0.3 - r)^2 and 3 of 5 rows are positive."""
+def oracle_policy(**overrides):
+    """reward="oracle" with R+ = 2, R- = -0.5, epsilon 0.5, the recorded goal, no filter, Q = 0.3, Q' = 0."""
     policy = make_policy(
         reward="oracle",
         oracle_epsilon=0.5,
@@ -467,10 +466,17 @@ def test_oracle_reward_is_r_plus_where_the_ground_truth_is_within_epsilon_of_the
         p_next=0.0,
         p_future=0.0,
         filter=False,
+        **overrides,
     )
     set_policy_weights(policy)
     constant_critics(policy)
-    _, stats = loss_and_stats(policy, oracle_batch())
+    return policy
+
+
+def test_oracle_reward_is_r_plus_where_the_ground_truth_is_within_epsilon_of_the_goal():
+    """reward="oracle" (R+ = 2, R- = -0.5): r = R+ where ||s_{t+1} - s_g|| <= epsilon, whatever the frames;
+    with Q = 0.3 and Q' = 0, critic_loss = mean (0.3 - r)^2 and 3 of 5 rows are positive."""
+    _, stats = loss_and_stats(oracle_policy(), oracle_batch())
     r = torch.where(torch.tensor(ORACLE_SUCCESS), 2.0, -0.5)
     close(stats["critic_loss"], ((0.3 - r) ** 2).mean())
     assert stats["frac_positive"].item() == pytest.approx(3 / 5)
@@ -486,19 +492,7 @@ def test_oracle_reward_flipped_at_rate_one_turns_every_true_positive_or_negative
 ):
     """The section-4 noisy oracle on the same batch: p_FN = 1 gives R- on all 5 rows (3 true positives
     flipped, the 2 negatives kept), p_FP = 1 gives R+ on all; the logged rates see the flips."""
-    policy = make_policy(
-        reward="oracle",
-        oracle_epsilon=0.5,
-        positive_reward=2.0,
-        negative_reward=-0.5,
-        p_next=0.0,
-        p_future=0.0,
-        filter=False,
-        reward_false_negative_rate=fn_rate,
-        reward_false_positive_rate=fp_rate,
-    )
-    set_policy_weights(policy)
-    constant_critics(policy)
+    policy = oracle_policy(reward_false_negative_rate=fn_rate, reward_false_positive_rate=fp_rate)
     _, stats = loss_and_stats(policy, oracle_batch())
     r = torch.where(torch.tensor(expected_positive), 2.0, -0.5)
     close(stats["critic_loss"], ((0.3 - r) ** 2).mean())

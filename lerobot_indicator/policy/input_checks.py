@@ -88,9 +88,8 @@ def check_env_for_policy(config, env_cfg, what: str = "eval env") -> None:
     obs_type = getattr(env_cfg, "obs_type", None)
     source = f"{what} {env_cfg.type}" + (f" (obs_type={obs_type})" if obs_type else "")
     fix = env_input_fix(env_cfg, config) or policy_env_options(config)
-    if (
-        obs_type and fix == f"use --env.obs_type={obs_type}"
-    ):  # already so: the env lacks a compared key's goal
+    # The env already has that obs_type: what it lacks is the goal of a compared key.
+    if obs_type and fix == f"use --env.obs_type={obs_type}":
         with_goal = sorted(
             k
             for k in features

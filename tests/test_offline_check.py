@@ -12,10 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from scipy.stats import spearmanr
 
 from lerobot_indicator.training import offline_check
-from lerobot_indicator.training.offline_check import check_episodes, ranks, spearman, value_ranking
+from lerobot_indicator.training.offline_check import check_episodes, spearman, value_ranking
 
 STATE, CONTEXT = "observation.state", "observation.environment_state"
 BIN = Path(sys.executable).parent
@@ -74,12 +73,13 @@ def test_a_reversed_critic_gives_minus_one_and_a_constant_one_is_undefined():
     assert abs(noise["q_rank_corr"]) < 0.15
 
 
-def test_spearman_matches_scipy_with_ties():
-    x = torch.tensor([3.0, 1.0, 2.0, 2.0, 5.0, 1.0])
-    y = torch.tensor([1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
-    assert spearman(x, y) == pytest.approx(spearmanr(x.numpy(), y.numpy()).statistic)
-    assert ranks(torch.tensor([10.0, 20.0, 10.0])).tolist() == [1.5, 3.0, 1.5]
-    assert math.isnan(spearman(torch.ones(4), y[:4]))
+def test_spearman_with_ties_by_hand_and_nan_when_constant():
+    """x = [10, 20, 10] ranks [1.5, 3, 1.5], y = [1, 3, 2] ranks [1, 3, 2]; centred (-0.5, 1, -0.5) and
+    (-1, 1, 0): 1.5 / sqrt(1.5 * 2) = 0.866."""
+    assert spearman(torch.tensor([10.0, 20.0, 10.0]), torch.tensor([1.0, 3.0, 2.0])) == pytest.approx(
+        1.5 / math.sqrt(3.0)
+    )
+    assert math.isnan(spearman(torch.ones(4), torch.arange(4.0)))
 
 
 def test_a_perfect_actor_has_zero_action_error_and_the_baselines_are_exact():

@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from lerobot.configs.default import DatasetConfig
+from scipy.stats import spearmanr
 from torch import Tensor
 
 # Offsets k of the value ordering, and the near goals of the action error (the check's defaults).
@@ -61,30 +62,14 @@ CriticFn = Callable[[dict[str, Tensor], dict[str, Tensor], Tensor], Tensor]  # (
 ActorFn = Callable[[dict[str, Tensor], dict[str, Tensor]], Tensor]  # (obs, goal) -> (B, A)
 
 
-def ranks(x: Tensor) -> Tensor:
-    """Ranks 1..n of a 1-d tensor, ties sharing their average rank (Spearman's convention)."""
-    x = x.double().flatten()
-    order = torch.argsort(x, stable=True)
-    sorted_x = x[order]
-    r = torch.empty_like(x)
-    i, n = 0, x.numel()
-    while i < n:
-        j = i
-        while j + 1 < n and sorted_x[j + 1] == sorted_x[i]:
-            j += 1
-        r[order[i : j + 1]] = (i + j) / 2 + 1
-        i = j + 1
-    return r
-
-
 def spearman(x: Tensor, y: Tensor) -> float:
-    """Spearman's rank correlation of two 1-d tensors; NaN when either is constant (no ordering to compare)."""
+    """Spearman's rank correlation of two 1-d tensors (scipy's, ties at their average rank); NaN when either
+    is constant (no ordering to compare)."""
     if x.numel() != y.numel():
         raise ValueError(f"spearman: {x.numel()} values against {y.numel()}")
-    rx, ry = ranks(x), ranks(y)
-    rx, ry = rx - rx.mean(), ry - ry.mean()
-    denom = math.sqrt(float((rx * rx).sum()) * float((ry * ry).sum()))
-    return float((rx * ry).sum()) / denom if denom > 0 else math.nan
+    if bool((x == x.flatten()[0]).all()) or bool((y == y.flatten()[0]).all()):
+        return math.nan
+    return float(spearmanr(x.double().flatten().numpy(), y.double().flatten().numpy()).statistic)
 
 
 def nanmean(values: Sequence[float]) -> float:

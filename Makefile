@@ -37,7 +37,7 @@ format: install
 demo: install
 	$(PY) scripts/demo.py
 
-# From pixels only (64x64 RGB-D images, the policy's default keys and settings with cameras), 8,000 env steps.
+# From pixels only (64x64 RGB-D images, the policy's default keys and settings with cameras), 10,000 env steps.
 demo-rgbd: install
 	$(PY) scripts/demo.py --preset=rgbd
 

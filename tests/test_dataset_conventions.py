@@ -11,6 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import yaml
+from huggingface_hub import DatasetCard
 from lerobot.datasets.utils import create_lerobot_dataset_card
 from lerobot.utils.feature_utils import dataset_to_policy_features
 
@@ -183,6 +184,12 @@ def test_card_names_paper_citation_simulator_sensors_and_command(reach_rgbd):
     parsed = draccus.parse(RecordConfig, args=shlex.split(command)[1:])
     assert recording_settings(parsed) == recording_settings(cfg)
     assert (parsed.policy, parsed.num_episodes) == (cfg.policy, ds.meta.total_episodes)
+    # A dataset that is never pushed carries the same card as its local README.md (third-party checkers and
+    # readers of the folder look for it there).
+    local = DatasetCard((ds.root / "README.md").read_text())
+    assert {"lerobot-indicator", "indicator-rewards", "sawyer_reach"} <= set(local.data.tags)
+    assert local.text == card.text and "@inproceedings{lin2019" in local.text
+    assert not (ds.root / "README.md.tmp").exists()
     # The env config block is plain YAML (no python tags) equal to the recorded settings.
     (block,) = re.findall(r"```yaml\n(.*?)```", text, flags=re.S)
     assert "!!python" not in block

@@ -174,6 +174,16 @@ def test_cameras_are_compared_by_default_never_the_joint_state(caplog):
     state_only = make_config({STATE: vec()})
     state_only.validate_features()
     assert state_only.observation_keys == [STATE]
+    # Beside observation.state, the other states (here a torque-driven arm's joint velocities) are context.
+    env_state = "observation.environment_state"
+    two_states = make_config({STATE: vec(), env_state: vec(4)})
+    two_states.validate_features()
+    assert two_states.observation_keys == [STATE] and two_states.context_keys == [env_state]
+    assert goal_key(env_state) not in two_states.input_features
+    # Without observation.state, every state key is compared.
+    no_state = make_config({env_state: vec(4), "observation.velocity": vec(2)})
+    no_state.validate_features()
+    assert no_state.observation_keys == [env_state, "observation.velocity"] and no_state.context_keys == []
     with pytest.raises(ValueError, match="episode_end_goal=false") as err:
         make_config({FRONT: img()}, episode_end_goal=False).validate_features()
     assert "\n" not in str(err.value)
@@ -213,7 +223,9 @@ def test_the_recorded_goal_stand_in_is_the_episode_last_frame():
     # No goal column and no episode-end frame: one line naming the goal key.
     with pytest.raises(ValueError, match=r"no goal 'observation.goal_state'") as err:
         indicator_core.dataset_batch_to_transitions(hand_made_batch(5, with_end=False), cfg)
-    assert "\n" not in str(err.value)
+    assert "\n" not in str(
+        err.value
+    ) and "needs --policy.episode_end_goal=true (the episode's last frame" in str(err.value)
 
 
 def make_state_dataset(root: Path, episodes: int, horizon: int) -> Path:

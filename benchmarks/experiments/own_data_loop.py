@@ -1,7 +1,9 @@
 """The whole loop on data this project did not write: record -> lerobot-train -> lerobot-eval -> offline check.
 
-1. **record**: gymnasium's Reacher (``--env.type=reacher``, ``obs_type=state``) driven by exploratory random
-   torques (each uniform in [-1, 1], held for 1-10 steps), written with LeRobot's OWN recording API
+1. **record**: gymnasium's Reacher (``--env.type=reacher``, ``obs_type=state``) driven by ``--exploration``:
+   ``random`` torques (each uniform in [-1, 1], held for 1-10 steps) or a noisy scripted ``teleop``erator
+   (a PD controller towards 1-3 random points per episode, standing in for a person driving the arm to places),
+   written with LeRobot's OWN recording API
    (``LeRobotDataset.create`` + ``add_frame`` + ``save_episode``, as a ``lerobot-record`` user's data is):
    ``observation.state`` (fingertip xy), ``observation.environment_state`` (joint cos, sin, velocities),
    ``action``; no reward, no goal column, no ground truth. Episodes hold T + 1 = 51 frames. The last
@@ -16,8 +18,8 @@
    away, actor's action error toward near goals): what was learned, without a simulator.
 6. **summary**: one JSON + PNG + the commands, in ``--results``.
 
-    python -m benchmarks.experiments.own_data_loop [--stages record train eval oracle check summary]
-        [--episodes 400] [--held_out 20] [--train_steps 3000] [--oracle_steps 10000] [--work outputs/own_data]
+    python -m benchmarks.experiments.own_data_loop [--exploration random|teleop]
+        [--stages record train eval oracle check summary] [--episodes 400] [--held_out 20] [--train_steps 3000]
 """
 
 from __future__ import annotations
@@ -35,7 +37,12 @@ import numpy as np
 from benchmarks.records import command_line
 
 BIN = Path(sys.executable).parent
-REPO_ID = "local/reacher_random_no_goal"
+EXPLORATION = {
+    "random": "uniform random torques in [-1, 1], each held 1-10 steps",
+    "teleop": "a noisy scripted teleoperator: per episode 1-3 points drawn like Reacher's goals (uniform in the "
+    "0.2 m disk), switched at random steps; torque = clip(kp * joint error - kd * joint velocity + N(0, 0.3^2)), "
+    "kp in [1.5, 5], kd in [0.1, 0.4] per episode",
+}
 STATE, ENV_STATE = "observation.state", "observation.environment_state"
 HORIZON = 50  # Reacher's T (docs/envs.md)
 # The lerobot-indicator-train runs beside lerobot-train's, and what each shows.
@@ -46,6 +53,8 @@ RUNS = {
     "no env episodes); the offline check logged with each evaluation (offline_*)",
 }
 STAGES = ("record", "train", "oracle", "online", "fast", "eval", "check", "summary")
+# Runs that use the env and no recorded data: made once, in --env_only_work, and shown beside every dataset's.
+ENV_ONLY = ("oracle", "online")
 
 
 def environment() -> dict[str, str]:
@@ -71,8 +80,37 @@ def exploratory_actions(rng: np.random.Generator, horizon: int, dim: int) -> np.
     return actions
 
 
-def record(root: Path, n_episodes: int, seed: int) -> dict:
-    """Episodes of Reacher under exploratory random torques, with LeRobot's own recording API; no goal column."""
+def repo_id(exploration: str) -> str:
+    return f"local/reacher_{exploration}_no_goal"
+
+
+def teleop_actions(env, rng: np.random.Generator, horizon: int) -> callable:
+    """A noisy scripted teleoperator for one episode (``EXPLORATION["teleop"]``): a function of nothing giving the
+    next torque from the arm's joint state, driving it in turn to 1-3 random points of the reach disk."""
+    from lerobot_indicator.envs.reacher import two_link_ik
+
+    u = env.unwrapped
+    n_points = int(rng.integers(1, 4))
+    switches = np.sort(rng.choice(np.arange(5, horizon - 5), n_points - 1, replace=False))
+    radius, angle = 0.2 * np.sqrt(rng.uniform(size=n_points)), rng.uniform(0, 2 * np.pi, n_points)
+    points = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
+    joints = [two_link_ik(p - u._base_xy, u._l1, u._l2, u._elbow_limit) for p in points]
+    kp, kd = rng.uniform(1.5, 5.0), rng.uniform(0.1, 0.4)
+    t = 0
+
+    def act() -> np.ndarray:
+        nonlocal t
+        target = joints[int(np.searchsorted(switches, t, side="right"))]
+        q, qd = u.data.qpos[u._arm_qpos], u.data.qvel[u._arm_qvel]
+        error = np.array([(target[0] - q[0] + np.pi) % (2 * np.pi) - np.pi, target[1] - q[1]])
+        t += 1
+        return np.clip(kp * error - kd * qd + rng.normal(0.0, 0.3, 2), -1.0, 1.0).astype(np.float32)
+
+    return act
+
+
+def record(root: Path, n_episodes: int, seed: int, exploration: str) -> dict:
+    """Episodes of Reacher under ``exploration``, with LeRobot's own recording API; no goal column."""
     import gymnasium as gym
     from lerobot.datasets import LeRobotDataset
 
@@ -90,15 +128,19 @@ def record(root: Path, n_episodes: int, seed: int) -> dict:
     }
     t0 = time.perf_counter()
     ds = LeRobotDataset.create(
-        REPO_ID, fps=50, features=features, root=root, robot_type="reacher", use_videos=False
+        repo_id(exploration), fps=50, features=features, root=root, robot_type="reacher", use_videos=False
     )
     rng = np.random.default_rng(seed)
     for ep in range(n_episodes):
         obs, _ = env.reset(seed=seed * 100_000 + ep)
-        actions = exploratory_actions(rng, HORIZON, 2)
+        if exploration == "teleop":
+            act = teleop_actions(env, rng, HORIZON)
+        else:
+            actions = iter(exploratory_actions(rng, HORIZON, 2))
+            act = actions.__next__
         for t in range(HORIZON + 1):
             # o_0..o_T; the last frame's action is never used (no o_{T+1}): zeros.
-            action = actions[t] if t < HORIZON else np.zeros(2, np.float32)
+            action = act() if t < HORIZON else np.zeros(2, np.float32)
             ds.add_frame({STATE: obs["agent_pos"], ENV_STATE: obs["environment_state"], "action": action,
                           "task": "reach"})  # fmt: skip
             if t < HORIZON:
@@ -160,8 +202,8 @@ def run(cmd: list[str], log: Path) -> float:
 def train_command(args, root: Path, out: Path) -> list[str]:
     train_eps = ",".join(map(str, range(args.episodes - args.held_out)))
     return [
-        str(BIN / "lerobot-train"), "--policy.type=indicator_ddpg", f"--dataset.repo_id={REPO_ID}",
-        f"--dataset.root={root}", f"--dataset.episodes=[{train_eps}]", f"--policy.observation_keys=[{STATE}]",
+        str(BIN / "lerobot-train"), "--policy.type=indicator_ddpg", f"--dataset.repo_id={repo_id(args.exploration)}",
+        f"--dataset.root={root}", f"--dataset.episodes=[{train_eps}]",
         "--policy.push_to_hub=false", "--policy.device=cpu", f"--batch_size={args.batch_size}",
         f"--steps={args.train_steps}", f"--num_workers={args.num_workers}", f"--save_freq={args.save_freq}",
         "--log_freq=100", "--wandb.enable=false", f"--seed={args.seed}", f"--output_dir={out}",
@@ -209,7 +251,8 @@ def fast_command(args, root: Path, out: Path) -> list[str]:
     return [
         str(BIN / "lerobot-indicator-train"), "--env.type=reacher", "--env.obs_type=state",
         "--policy.type=indicator_ddpg", "--policy.push_to_hub=false", "--policy.device=cpu",
-        f"--dataset.repo_id={REPO_ID}", f"--dataset.root={root}", f"--dataset.episodes=[{train_eps}]",
+        f"--dataset.repo_id={repo_id(args.exploration)}", f"--dataset.root={root}",
+        f"--dataset.episodes=[{train_eps}]",
         "--online.episodes_per_cycle=0", f"--steps={args.fast_steps}", f"--online.eval_episodes={args.eval_episodes}",
         f"--env_eval_freq={args.fast_steps // 6}", f"--save_freq={args.fast_steps}", f"--seed={args.seed}",
         f"--output_dir={out}",
@@ -227,9 +270,15 @@ def goals_command(args, policy: Path, out: Path) -> list[str]:
 def check_command(args, root: Path, policy: Path, out: Path) -> list[str]:
     held = ",".join(map(str, range(args.episodes - args.held_out, args.episodes)))
     return [
-        str(BIN / "lerobot-indicator-offline-check"), f"--policy.path={policy}", f"--dataset.repo_id={REPO_ID}",
+        str(BIN / "lerobot-indicator-offline-check"), f"--policy.path={policy}",
+        f"--dataset.repo_id={repo_id(args.exploration)}",
         f"--dataset.root={root}", f"--episodes=[{held}]", f"--output_dir={out}",
     ]  # fmt: skip
+
+
+def work_of(args, name: str) -> Path:
+    """The directory of run ``name``: ``--env_only_work`` for the runs without data, else ``--work``."""
+    return args.env_only_work if name in ENV_ONLY else args.work
 
 
 def checkpoints(args) -> dict[str, Path]:
@@ -239,7 +288,7 @@ def checkpoints(args) -> dict[str, Path]:
     for step in sorted(p.name for p in train.glob("[0-9]*")) if train.is_dir() else []:
         found[f"lerobot_train_{int(step)}"] = train / step / "pretrained_model"
     for name in ("oracle", "online", "fast"):
-        last = args.work / name / "checkpoints" / "last" / "pretrained_model"
+        last = work_of(args, name) / name / "checkpoints" / "last" / "pretrained_model"
         if last.exists():
             found[name] = last
     return found
@@ -247,6 +296,9 @@ def checkpoints(args) -> dict[str, Path]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument(
+        "--exploration", default="random", choices=sorted(EXPLORATION), help="how the data is driven"
+    )
     p.add_argument("--stages", nargs="+", default=list(STAGES), choices=STAGES)
     p.add_argument("--episodes", type=int, default=400, help="recorded episodes, held-out ones included")
     p.add_argument("--held_out", type=int, default=20, help="the last episodes, never trained on")
@@ -258,24 +310,30 @@ def main() -> None:
     p.add_argument("--fast_steps", type=int, default=12000)
     p.add_argument("--eval_episodes", type=int, default=50)
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--work", type=Path, default=Path("outputs/own_data"))
-    p.add_argument("--results", type=Path, default=Path("docs/results/own_data"))
+    p.add_argument("--work", type=Path, help="default: outputs/own_data/<exploration>")
+    p.add_argument("--results", type=Path, help="default: docs/results/own_data/<exploration>")
+    p.add_argument(
+        "--env_only_work", type=Path, help="the Oracle's and online runs; default: outputs/own_data/random"
+    )
     args = p.parse_args()
+    args.work = args.work or Path("outputs/own_data") / args.exploration
+    args.results = args.results or Path("docs/results/own_data") / args.exploration
+    args.env_only_work = args.env_only_work or Path("outputs/own_data/random")
     root, state_file = args.work / "dataset", args.work / "stages.json"
-    done = json.loads(state_file.read_text()) if state_file.exists() else {}
+    done = read_stages(args.work)
     done.setdefault("commands", []).append(command_line())
     logs = args.work / "logs"
     for stage in args.stages:
         t0 = time.perf_counter()
         if stage == "record":
-            done["record"] = record(root, args.episodes, args.seed)
+            done["record"] = record(root, args.episodes, args.seed, args.exploration)
         elif stage == "train":
             cmd = train_command(args, root, args.work / "train")
             done["train"] = {"command": cmd, "seconds": run(cmd, logs / "train.log")}
         elif stage in ("oracle", "online", "fast"):
             make = {"oracle": oracle_command, "online": online_command}.get(stage)
             make = make or (lambda a, out: fast_command(a, root, out))
-            cmd = make(args, args.work / stage)
+            cmd = make(args, work_of(args, stage) / stage)
             done[stage] = {"command": cmd, "seconds": run(cmd, logs / f"{stage}.log")}
         elif stage == "eval":
             done["baselines"] = baselines(args.eval_episodes, args.seed)
@@ -284,22 +342,28 @@ def main() -> None:
             for name, policy in checkpoints(args).items():
                 for kind, make in (("lerobot_eval", eval_command), ("goals", goals_command)):
                     key = f"{kind}/{name}"
-                    if key in done:
+                    if key in done or key in read_stages(work_of(args, name)):
                         continue
-                    out = args.work / kind / name
+                    out = work_of(args, name) / kind / name
                     if kind == "goals":
                         out = out / "eval_goals.json"
                     cmd = make(args, policy, out)
                     done[key] = {"command": cmd, "seconds": run(cmd, logs / f"{kind}_{name}.log")}
         elif stage == "check":
             for name, policy in checkpoints(args).items():
-                cmd = check_command(args, root, policy, args.work / "check" / name)
+                cmd = check_command(args, root, policy, args.work / "check" / name)  # on this data's episodes
                 done[f"check/{name}"] = {"command": cmd, "seconds": run(cmd, logs / f"check_{name}.log")}
         elif stage == "summary":
             summarize(args, done)
         print(f"{stage}: {time.perf_counter() - t0:.0f} s", flush=True)
         state_file.parent.mkdir(parents=True, exist_ok=True)
         state_file.write_text(json.dumps(done, indent=1, default=str))
+
+
+def read_stages(work: Path) -> dict:
+    """What the stages run in ``work`` recorded (their commands and times)."""
+    state_file = work / "stages.json"
+    return json.loads(state_file.read_text()) if state_file.exists() else {}
 
 
 def read_jsonl(path: Path) -> list[dict]:
@@ -337,18 +401,21 @@ def summarize(args, done: dict) -> None:
 
     from benchmarks.records import machine_record
 
+    env_only_done = read_stages(args.env_only_work)
+
     def command(key: str) -> str:
-        return " ".join(done[key]["command"]) if key in done else ""
+        stages = env_only_done if key.rpartition("/")[2] in ENV_ONLY and key not in done else done
+        return " ".join(stages[key]["command"]) if key in stages else ""
 
     policies = {}
     for name in checkpoints(args):
         entry: dict = {}
-        info = args.work / "lerobot_eval" / name / "eval_info.json"
+        info = work_of(args, name) / "lerobot_eval" / name / "eval_info.json"
         if info.exists():
             agg = json.loads(info.read_text())["overall"]
             entry["lerobot_eval"] = {"pc_success_any_step": agg["pc_success"], "avg_sum_reward": agg["avg_sum_reward"],
                                      "command": command(f"lerobot_eval/{name}")}  # fmt: skip
-        goals = args.work / "goals" / name / "eval_goals.json"
+        goals = work_of(args, name) / "goals" / name / "eval_goals.json"
         if goals.exists():
             g = json.loads(goals.read_text())
             entry["final_step_eval"] = {
@@ -372,29 +439,29 @@ def summarize(args, done: dict) -> None:
         name: {
             "what": RUNS[name],
             "command": command(name),
-            "wall_s": done.get(name, {}).get("seconds"),
+            "wall_s": (env_only_done if name in ENV_ONLY else done).get(name, {}).get("seconds"),
             "evaluations": [
                 {k: r[k] for k in logged if k in r}
-                for r in read_jsonl(args.work / name / "metrics.jsonl")
+                for r in read_jsonl(work_of(args, name) / name / "metrics.jsonl")
                 if "eval_success_rate" in r
             ],
         }
         for name in RUNS
-        if name in done
+        if name in done or name in env_only_done
     }
     held = list(range(args.episodes - args.held_out, args.episodes))
     record = {
-        "what": "Reacher (gymnasium Reacher-v5, state observations): goal-free exploratory data recorded with "
+        "what": f"Reacher (gymnasium Reacher-v5, state observations): goal-free {args.exploration} data recorded with "
         "LeRobot's own API -> lerobot-train --policy.type=indicator_ddpg -> lerobot-eval on 50 goals -> offline check "
         "on held-out episodes; the Oracle (ground-truth reward) trained online beside it",
         "command": done.get("commands", [])[-1:],
         "machine": machine_record(),
         "dataset": {
             **done.get("record", {}),
-            "repo_id": REPO_ID,
+            "repo_id": repo_id(args.exploration),
             "features": [STATE, ENV_STATE, "action"],
             "goal_columns": False,
-            "exploration": "uniform random torques in [-1, 1], each held 1-10 steps",
+            "exploration": EXPLORATION[args.exploration],
             "train_episodes": args.episodes - args.held_out,
             "held_out_episodes": held,
         },  # fmt: skip

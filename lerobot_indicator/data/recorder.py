@@ -35,6 +35,7 @@ import torch
 import yaml
 from lerobot.configs import parser
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
+from lerobot.datasets.utils import create_lerobot_dataset_card
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, HF_LEROBOT_HOME, OBS_IMAGES
 from lerobot.utils.utils import init_logging
@@ -455,6 +456,9 @@ def dataset_card(dataset: LeRobotDataset, cfg: RecordConfig, command: str) -> di
             f"observation bit for bit on {cfg.reward_keys}, else {cfg.r_neg}). An episode of T steps has T + 1 "
             f"frames: the last holds the final observation o_T, which no action follows; {final_frame}.",
             "",
+            "Limitations: the data is **synthetic** (rendered by a simulator, not a real robot's cameras): no sensor "
+            "noise, latency or calibration error, so a policy trained on it alone is not ready for a real robot.",
+            "",
             "Env config:",
             "",
             f"```yaml\n{yaml.safe_dump(env, sort_keys=False)}```",
@@ -463,10 +467,32 @@ def dataset_card(dataset: LeRobotDataset, cfg: RecordConfig, command: str) -> di
     return {"dataset_description": description, "paper": PAPER, "citation_bibtex": CITATION_BIBTEX}
 
 
-def push_dataset(dataset: LeRobotDataset, cfg: RecordConfig, tags: list[str], command: str) -> None:
+def card_tags(cfg: RecordConfig, extra: list[str] | None = None) -> list[str]:
+    return list(
+        dict.fromkeys(["lerobot-indicator", "indicator-rewards", cfg.env.type, *cfg.tags, *(extra or [])])
+    )
+
+
+def write_card(
+    dataset: LeRobotDataset, cfg: RecordConfig, command: str, extra_tags: list[str] | None = None
+) -> None:
+    """The dataset card ``push_dataset`` puts on the Hub, also as the local ``README.md`` (written atomically),
+    so a dataset that is never pushed still says what it holds."""
+    card = create_lerobot_dataset_card(
+        tags=card_tags(cfg, extra_tags), dataset_info=dataset.meta.info, license=cfg.license, repo_id=cfg.repo_id,
+        **dataset_card(dataset, cfg, command),
+    )  # fmt: skip
+    tmp = Path(dataset.root) / "README.md.tmp"
+    tmp.write_text(str(card))
+    tmp.replace(Path(dataset.root) / "README.md")
+
+
+def push_dataset(
+    dataset: LeRobotDataset, cfg: RecordConfig, command: str, extra_tags: list[str] | None = None
+) -> None:
     """``LeRobotDataset.push_to_hub`` with this project's tags and dataset card."""
     dataset.push_to_hub(
-        tags=list(dict.fromkeys(["lerobot-indicator", "indicator-rewards", cfg.env.type, *tags])),
+        tags=card_tags(cfg, extra_tags),
         license=cfg.license,
         private=cfg.private,
         **dataset_card(dataset, cfg, command),
@@ -525,8 +551,10 @@ def record(cfg: RecordConfig) -> LeRobotDataset:
     finally:
         vec_env.close()
     dataset = session.committed_dataset()
+    command = record_command(cfg, dataset.meta.total_episodes)
+    write_card(dataset, cfg, command)
     if cfg.push_to_hub:
-        push_dataset(dataset, cfg, cfg.tags, record_command(cfg, dataset.meta.total_episodes))
+        push_dataset(dataset, cfg, command)
     return dataset
 
 

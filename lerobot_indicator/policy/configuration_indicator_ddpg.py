@@ -14,7 +14,7 @@ from draccus.parsers.encoding import encode_choice, encode_dataclass
 from draccus.utils import is_choice_type
 from lerobot.configs import FeatureType, NormalizationMode, PolicyFeature, PreTrainedConfig
 from lerobot.optim import AdamConfig, OptimizerConfig
-from lerobot.utils.constants import ACTION
+from lerobot.utils.constants import ACTION, OBS_STATE
 
 from lerobot_indicator.keys import OBS_PREFIX, goal_key, is_goal_key, is_ground_truth_key
 
@@ -509,15 +509,15 @@ class IndicatorDDPGConfig(PreTrainedConfig):
         self.input_features = {k: features[k] for k in keep}
 
     def _episode_end_goal_features(self, features: dict[str, PolicyFeature]) -> dict[str, PolicyFeature]:
-        """Data without goal columns: choose the compared keys (cameras, else the state keys) and give each a
-        goal feature of its own shape. Every relabeled goal is a later frame of the same episode; where the
+        """Data without goal columns: choose the compared keys (the cameras; without one, ``observation.state``
+        if the data has it, else every state key) and give each a goal feature of its own shape. The states not
+        compared become context inputs. Every relabeled goal is a later frame of the same episode; where the
         method keeps the recorded goal, the episode's last frame stands in for it."""
         observed = [k for k in features if k.startswith(OBS_PREFIX) and not is_ground_truth_key(k)]
         if self.observation_keys is None:
             cameras = [k for k in observed if features[k].type is FeatureType.VISUAL]
-            self.observation_keys = cameras or [
-                k for k in observed if features[k].type is not FeatureType.VISUAL
-            ]
+            states = [k for k in observed if features[k].type is not FeatureType.VISUAL]
+            self.observation_keys = cameras or ([OBS_STATE] if OBS_STATE in states else states)
             if not self.observation_keys:
                 raise ValueError(
                     f"no observation key among the input features {sorted(features)}: nothing to compare"

@@ -16,6 +16,7 @@ from lerobot_indicator.data.recorder import (
     env_args,
     open_recording,
     push_dataset,
+    write_card,
     write_episode,
 )
 from lerobot_indicator.training.config import OnlineTrainConfig
@@ -80,8 +81,10 @@ class RolloutRecorder:
 
     def finish(self, push_tags: list[str] | None) -> None:
         self.session.close()
+        dataset = self.session.committed_dataset()
+        write_card(dataset, self.cfg, self.command, push_tags)
         if push_tags is not None:
-            push_dataset(self.session.committed_dataset(), self.cfg, push_tags, self.command)
+            push_dataset(dataset, self.cfg, self.command, push_tags)
 
     def close(self) -> None:
         """Also on a crash: stop LeRobot's writer; every committed episode stays as it is."""

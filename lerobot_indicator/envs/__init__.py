@@ -27,6 +27,10 @@ from lerobot_indicator.envs.configs import (
     SawyerReachEnvConfig,
 )
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
+from lerobot_indicator.envs.sim_robot import (  # --robot.type=indicator_sim_reach
+    SimReachRobot,
+    SimReachRobotConfig,
+)
 
 SAWYER_REACH_ID = f"{GYM_NAMESPACE}/{SAWYER_REACH_TASK}"
 ROPE_PUSH_ID = f"{GYM_NAMESPACE}/{ROPE_PUSH_TASK}"
@@ -49,6 +53,8 @@ for _gym_id, _entry_point, _horizon in (
         gym.register(id=_gym_id, entry_point=_entry_point, max_episode_steps=_horizon)
 
 __all__ = [
+    "SimReachRobot",
+    "SimReachRobotConfig",
     "FETCH_PUSH_ID",
     "FETCH_REACH_ID",
     "FETCH_SLIDE_ID",

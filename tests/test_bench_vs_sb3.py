@@ -200,7 +200,7 @@ def test_sb3_with_normalised_inputs_stores_raw_goals_and_evaluates_normalised():
     from benchmarks.experiments import vs_sb3
 
     s = vs_sb3.Settings(task="fetch_reach_state", episodes_per_cycle=1, updates_per_cycle=2, batch_size=16)
-    model = vs_sb3.make_sb3(0, s, normalize=True)
+    model = vs_sb3.make_sb3(0, s, learner="sb3_ddpg_her_norm")
     normalizer = model.get_vec_normalize_env()
     assert normalizer is not None and normalizer.clip_obs == 5.0 and not normalizer.norm_reward
     model.learn(total_timesteps=100)
@@ -215,3 +215,24 @@ def test_sb3_with_normalised_inputs_stores_raw_goals_and_evaluates_normalised():
     np.testing.assert_array_equal(samples.rewards.numpy()[:, 0], -(distance > 0.05).astype(np.float32))
     result = vs_sb3.evaluate_sb3(model, vs_sb3.make_sb3_env(s), 1, s.horizon)
     assert result["eval_success_rate"] in (0.0, 1.0)
+
+
+def test_sb3_td3_and_zoo_sac_learners_are_built_with_their_settings():
+    pytest.importorskip("stable_baselines3")
+    from stable_baselines3 import SAC, TD3
+
+    from benchmarks.experiments import vs_sb3
+
+    s = vs_sb3.Settings(task="fetch_reach_state", episodes_per_cycle=1, updates_per_cycle=2, batch_size=16)
+    td3 = vs_sb3.make_sb3(0, s, learner="sb3_td3_her")
+    # The shared settings (as DDPG's): gamma 1 - 1/T, tau 0.02, the cycle's gradient steps, HER future x4.
+    assert isinstance(td3, TD3) and td3.gamma == 1 - 1 / 50 and td3.tau == 0.02 and td3.gradient_steps == 2
+    assert td3.replay_buffer_kwargs == {"n_sampled_goal": 4, "goal_selection_strategy": "future"}
+    sac = vs_sb3.make_sb3(0, s, learner="sb3_sac_her_zoo")
+    # rl-baselines3-zoo's FetchReach settings, not the shared ones.
+    assert (
+        isinstance(sac, SAC) and sac.gamma == 0.95 and sac.batch_size == 256 and sac.learning_starts == 1000
+    )
+    assert sac.ent_coef == "auto" and sac.train_freq.frequency == 1 and sac.gradient_steps == 1
+    sac.learn(total_timesteps=50)
+    assert sac.get_env().envs[0].unwrapped.spec.id == "FetchReach-v4" and sac._n_updates == 0

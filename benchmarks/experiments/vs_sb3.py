@@ -57,10 +57,20 @@ COMMON_DIFFERENCES = [
 # Our learners: the package's method presets.
 OURS = {"ours_oracle": "oracle", "ours_indicator": "indicator_balance_filter"}
 LEARNERS = ("sb3_ddpg_her", *OURS)
-# SB3 with input normalisation (``VecNormalize`` of observation and goals, clipped to +-5, reward untouched): what
-# rl-baselines3-zoo's HER configs set for the Fetch tasks (``normalize: true``) and what ours does; asked for by
-# name (``--methods``), not part of the default run.
-SB3_VARIANTS = ("sb3_ddpg_her_norm",)
+# Asked for by name (``--methods``), not part of the default run. ``sb3_ddpg_her_norm``: with input normalisation
+# (``VecNormalize`` of observation and goals, clipped to +-5, reward untouched), what rl-baselines3-zoo's HER
+# configs set for the Fetch tasks (``normalize: true``) and what ours does. ``sb3_td3_her``: TD3 (twin critics,
+# delayed actor, target smoothing) with the shared settings. ``sb3_sac_her_zoo``: SAC + HER with
+# rl-baselines3-zoo's FetchReach hyper-parameters (SAC_ZOO), SB3's tuned reference on this task.
+SB3_VARIANTS = ("sb3_ddpg_her_norm", "sb3_td3_her", "sb3_sac_her_zoo")
+# rl-baselines3-zoo's SAC + HER settings for FetchReach (its hyperparams for FetchReach-v1: 20k env steps).
+SAC_ZOO = {
+    "gamma": 0.95,
+    "learning_rate": 1e-3,
+    "batch_size": 256,
+    "learning_starts": 1000,
+    "ent_coef": "auto",
+}
 SB3_LEARNERS = ("sb3_ddpg_her", *SB3_VARIANTS)
 ALL_LEARNERS = (*LEARNERS, *SB3_VARIANTS)
 SUCCESS_TARGET = 0.9
@@ -169,17 +179,25 @@ def make_sb3_env(s: Settings):
     return env
 
 
-def make_sb3(seed: int, s: Settings, learning_starts: int = 0, normalize: bool = False):
-    """SB3 DDPG + HER; ``normalize``: through ``VecNormalize`` (observation and goals, clipped to +-5; the
-    replay buffer keeps raw observations, so HER's relabeled rewards use raw goals)."""
-    from stable_baselines3 import DDPG, HerReplayBuffer
+def make_sb3(seed: int, s: Settings, learning_starts: int = 0, learner: str = "sb3_ddpg_her"):
+    """SB3 + HER for ``learner`` (SB3_LEARNERS). ``sb3_ddpg_her_norm`` goes through ``VecNormalize``
+    (observation and goals, clipped to +-5; the replay buffer keeps raw observations, so HER's relabeled rewards
+    use raw goals)."""
+    from stable_baselines3 import DDPG, SAC, TD3, HerReplayBuffer
     from stable_baselines3.common.noise import NormalActionNoise
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
     from torch import nn
 
     env = make_sb3_env(s)
     n_actions = env.action_space.shape[0]
-    if normalize:
+    her = {"replay_buffer_class": HerReplayBuffer,
+           "replay_buffer_kwargs": {"n_sampled_goal": 4, "goal_selection_strategy": "future"}}  # fmt: skip
+    if learner == "sb3_sac_her_zoo":
+        zoo = {**SAC_ZOO, "learning_starts": max(SAC_ZOO["learning_starts"], learning_starts)}
+        return SAC(
+            "MultiInputPolicy", env, buffer_size=1_000_000, seed=seed, device="cpu", verbose=0, **zoo, **her
+        )
+    if learner == "sb3_ddpg_her_norm":
         env = VecNormalize(
             DummyVecEnv([lambda: env]),
             norm_obs=True,
@@ -187,7 +205,7 @@ def make_sb3(seed: int, s: Settings, learning_starts: int = 0, normalize: bool =
             clip_obs=5.0,
             gamma=1 - 1 / s.horizon,
         )
-    return DDPG(
+    return (TD3 if learner == "sb3_td3_her" else DDPG)(
         "MultiInputPolicy",
         env,
         learning_rate=s.lr,
@@ -199,8 +217,7 @@ def make_sb3(seed: int, s: Settings, learning_starts: int = 0, normalize: bool =
         train_freq=(s.episodes_per_cycle, "episode"),
         gradient_steps=s.updates_per_cycle,
         action_noise=NormalActionNoise(np.zeros(n_actions), s.noise * np.ones(n_actions)),
-        replay_buffer_class=HerReplayBuffer,
-        replay_buffer_kwargs={"n_sampled_goal": 4, "goal_selection_strategy": "future"},
+        **her,
         policy_kwargs={"net_arch": [256, 256, 256], "activation_fn": nn.Tanh},
         seed=seed,
         device="cpu",
@@ -230,10 +247,10 @@ def evaluate_sb3(model, env, n_episodes: int, horizon: int) -> dict[str, float]:
     return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
 
 
-def run_sb3(seed: int, s: Settings, normalize: bool = False) -> dict:
+def run_sb3(seed: int, s: Settings, learner: str) -> dict:
     from stable_baselines3.common.callbacks import BaseCallback
 
-    model = make_sb3(seed, s, normalize=normalize)
+    model = make_sb3(seed, s, learner=learner)
     eval_env = make_sb3_env(s)
     curve: list[dict] = []
     clock = {"eval": 0.0, "collect": 0.0, "rollout_t0": 0.0, "start": 0.0}
@@ -373,10 +390,7 @@ def run_ours(learner: str, seed: int, s: Settings) -> dict:
 def run_learner(learner: str, seed: int, s: Settings) -> dict:
     torch.set_num_threads(s.threads)
     t0 = time.perf_counter()
-    if learner in SB3_LEARNERS:
-        run = run_sb3(seed, s, normalize=learner == "sb3_ddpg_her_norm")
-    else:
-        run = run_ours(learner, seed, s)
+    run = run_sb3(seed, s, learner) if learner in SB3_LEARNERS else run_ours(learner, seed, s)
     run["process_wall_s"] = time.perf_counter() - t0
     return run
 
@@ -608,12 +622,16 @@ def plot(record: dict, png: Path) -> None:
     colors = {
         "sb3_ddpg_her": "tab:gray",
         "sb3_ddpg_her_norm": "black",
+        "sb3_td3_her": "tab:brown",
+        "sb3_sac_her_zoo": "tab:green",
         "ours_oracle": "tab:blue",
         "ours_indicator": "tab:red",
     }
     labels = {
         "sb3_ddpg_her": "SB3 DDPG+HER (GT reward)",
         "sb3_ddpg_her_norm": "SB3 DDPG+HER, normalised inputs (GT reward)",
+        "sb3_td3_her": "SB3 TD3+HER (GT reward)",
+        "sb3_sac_her_zoo": "SB3 SAC+HER, rl-zoo settings (GT reward)",
         "ours_oracle": "ours, oracle (GT reward)",
         "ours_indicator": "ours, indicator+balance+filter",
     }

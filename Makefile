@@ -41,9 +41,9 @@ demo: install
 demo-rgbd: install
 	$(PY) scripts/demo.py --preset=rgbd
 
-# Mutation testing (mutmut, the `mutation` extra) of the learning core, the replay buffer and the online
+# Mutation testing (mutmut, the `mutation` extra) of the learning core, the encode-once path, the replay buffer and the online
 # trainer's batch assembly against their fast tests; settings in pyproject.toml [tool.mutmut]. Not part of
-# `make test`: it runs every mutant (about 1500; docs/results/mutation.json). mutmut keeps its verdicts in
+# `make test`: it runs every mutant (about 1900; docs/results/mutation.json). mutmut keeps its verdicts in
 # mutants/ and reruns the mutants of changed functions only, not those whose tests changed: after a test
 # change, `rm -rf mutants` first. Report: docs/results/mutation.json (+ mutation.md, the argued survivors).
 MUTATION_JOBS ?= 2

@@ -36,8 +36,10 @@ def test_a_batch_without_frame_axis_fails_naming_the_key_and_shape():
     for bad in (batch[STATE][:, 0, 0], batch[STATE][:, :3]):
         with pytest.raises(
             ValueError, match=rf"'{STATE}' has shape \({bad.shape[0]},.*expected \(B, {N_FRAMES}"
-        ):
+        ) as err:
             core.dataset_batch_to_transitions({**batch, STATE: bad}, config())
+        # Both frame counts a lerobot-train sample may hold: with or without the episode's last frame.
+        assert str(err.value).endswith(f", or (B, {N_FRAMES + 1}, ...) with the episode's last frame")
 
 
 def test_one_number_per_frame_is_accepted():

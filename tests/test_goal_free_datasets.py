@@ -223,9 +223,9 @@ def test_the_recorded_goal_stand_in_is_the_episode_last_frame():
     # No goal column and no episode-end frame: one line naming the goal key.
     with pytest.raises(ValueError, match=r"no goal 'observation.goal_state'") as err:
         indicator_core.dataset_batch_to_transitions(hand_made_batch(5, with_end=False), cfg)
-    assert "\n" not in str(
-        err.value
-    ) and "needs --policy.episode_end_goal=true (the episode's last frame" in str(err.value)
+    assert "\n" not in str(err.value) and str(err.value).endswith(
+        "needs --policy.episode_end_goal=true (the episode's last frame stands in for the recorded goal)"
+    )
 
 
 def make_state_dataset(root: Path, episodes: int, horizon: int) -> Path:

@@ -503,6 +503,20 @@ def test_oracle_reward_flipped_at_rate_one_turns_every_true_positive_or_negative
     )  # right only on the unflipped class
 
 
+def test_noisy_oracle_flips_are_drawn_from_the_loss_generator():
+    """p_FN = p_FP = 0.5: which rows flip depends on the generator passed to the loss alone (a run's seed),
+    never on torch's global random state."""
+    policy = oracle_policy(reward_false_negative_rate=0.5, reward_false_positive_rate=0.5)
+
+    def flips(seed: int, global_seed: int) -> tuple[float, float]:
+        torch.manual_seed(global_seed)
+        _, stats = loss_and_stats(policy, oracle_batch(), seed=seed)
+        return stats["critic_loss"].item(), stats["frac_positive"].item()
+
+    assert len({flips(7, g) for g in range(4)}) == 1
+    assert len({flips(seed, 0) for seed in range(8)}) > 1  # the draws do move with the seed
+
+
 def test_flip_rewards_flips_each_class_at_its_own_rate_and_nothing_at_zero():
     success = torch.arange(200_000) % 4 == 0  # 50,000 true positives, 150,000 true negatives
     assert core.flip_rewards(success, 0.0, 0.0) is success
@@ -512,6 +526,30 @@ def test_flip_rewards_flips_each_class_at_its_own_rate_and_nothing_at_zero():
     assert noisy[~success].float().mean().item() == pytest.approx(0.05, abs=0.002)
     u = torch.rand(success.shape, generator=torch.Generator().manual_seed(3))
     assert torch.equal(noisy, torch.where(success, u >= 0.3, u < 0.05))
+
+
+def test_flip_rewards_keeps_a_draw_equal_to_the_fn_rate_and_flips_only_draws_below_the_fp_rate():
+    # The draws the generator will give, taken as the rates: a positive is kept when u >= p_FN (so at u = p_FN
+    # it is kept) and a negative turned positive when u < p_FP (so at u = p_FP it is not).
+    u = torch.rand(2, generator=torch.Generator().manual_seed(5))
+    out = core.flip_rewards(
+        torch.tensor([True, False]), float(u[0]), float(u[1]), torch.Generator().manual_seed(5)
+    )
+    assert out.tolist() == [True, False]
+
+
+def test_flip_rewards_draws_on_the_generator_device_and_answers_on_the_batch_device():
+    """A CPU generator with a batch on another device (a CUDA batch in training; "meta" on CPU-only CI): the
+    draws come from the generator on its own device whatever the default device, the result is on the batch's."""
+    success = torch.tensor([True, False, True, False], device="meta")
+    g, reference = torch.Generator().manual_seed(3), torch.Generator().manual_seed(3)
+    with torch.device("meta"):
+        out = core.flip_rewards(success, 0.3, 0.1, g)
+    assert out.device.type == "meta" and out.shape == (4,) and out.dtype == torch.bool
+    torch.rand(4, generator=reference)
+    assert torch.equal(g.get_state(), reference.get_state())  # 4 draws taken from the CPU generator
+    # No generator: torch's default one, on the batch's device.
+    assert core.flip_rewards(torch.tensor([True, False]), 0.0, 1.0).tolist() == [True, True]
 
 
 @pytest.mark.parametrize(

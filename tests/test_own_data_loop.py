@@ -21,15 +21,8 @@ def test_the_scripted_teleoperator_drives_the_fingertip_to_its_point(monkeypatch
     ends, starts = [], []
     for seed in range(6):
         obs, _ = env.reset(seed=seed)
-        state = rng.bit_generator.state
-        act = own_data_loop.teleop_actions(env, rng, own_data_loop.HORIZON)
-        # The same draws again, to know the episode's points: its last point is where it should end.
-        replay = np.random.default_rng()
-        replay.bit_generator.state = state
-        n_points = int(replay.integers(1, 4))
-        replay.choice(np.arange(5, own_data_loop.HORIZON - 5), n_points - 1, replace=False)
-        radius, angle = 0.2 * np.sqrt(replay.uniform(size=n_points)), replay.uniform(0, 2 * np.pi, n_points)
-        last = np.array([radius[-1] * np.cos(angle[-1]), radius[-1] * np.sin(angle[-1])])
+        act, points = own_data_loop.teleop_actions(env, rng, own_data_loop.HORIZON)
+        last = points[-1]  # where the episode should end
         starts.append(np.linalg.norm(obs["agent_pos"] - last))
         for _ in range(own_data_loop.HORIZON):
             action = act()

@@ -30,6 +30,7 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -84,29 +85,31 @@ def repo_id(exploration: str) -> str:
     return f"local/reacher_{exploration}_no_goal"
 
 
-def teleop_actions(env, rng: np.random.Generator, horizon: int) -> callable:
+def teleop_actions(
+    env, rng: np.random.Generator, horizon: int
+) -> tuple[Callable[[], np.ndarray], np.ndarray]:
     """A noisy scripted teleoperator for one episode (``EXPLORATION["teleop"]``): a function of nothing giving the
-    next torque from the arm's joint state, driving it in turn to 1-3 random points of the reach disk."""
-    from lerobot_indicator.envs.reacher import two_link_ik
-
+    next torque from the arm's joint state, driving it in turn to 1-3 random points of the reach disk, and those
+    points (world xy, in the order visited)."""
     u = env.unwrapped
     n_points = int(rng.integers(1, 4))
     switches = np.sort(rng.choice(np.arange(5, horizon - 5), n_points - 1, replace=False))
     radius, angle = 0.2 * np.sqrt(rng.uniform(size=n_points)), rng.uniform(0, 2 * np.pi, n_points)
     points = np.stack([radius * np.cos(angle), radius * np.sin(angle)], 1)
-    joints = [two_link_ik(p - u._base_xy, u._l1, u._l2, u._elbow_limit) for p in points]
+    joints = [u.joints_reaching(p) for p in points]
     kp, kd = rng.uniform(1.5, 5.0), rng.uniform(0.1, 0.4)
     t = 0
 
     def act() -> np.ndarray:
         nonlocal t
         target = joints[int(np.searchsorted(switches, t, side="right"))]
-        q, qd = u.data.qpos[u._arm_qpos], u.data.qvel[u._arm_qvel]
+        cos, sin, qd = np.split(u.environment_state(), 3)  # (cos, sin, velocity) of the two joints
+        q = np.arctan2(sin, cos)
         error = np.array([(target[0] - q[0] + np.pi) % (2 * np.pi) - np.pi, target[1] - q[1]])
         t += 1
         return np.clip(kp * error - kd * qd + rng.normal(0.0, 0.3, 2), -1.0, 1.0).astype(np.float32)
 
-    return act
+    return act, points
 
 
 def record(root: Path, n_episodes: int, seed: int, exploration: str) -> dict:
@@ -134,7 +137,7 @@ def record(root: Path, n_episodes: int, seed: int, exploration: str) -> dict:
     for ep in range(n_episodes):
         obs, _ = env.reset(seed=seed * 100_000 + ep)
         if exploration == "teleop":
-            act = teleop_actions(env, rng, HORIZON)
+            act, _ = teleop_actions(env, rng, HORIZON)
         else:
             actions = iter(exploratory_actions(rng, HORIZON, 2))
             act = actions.__next__

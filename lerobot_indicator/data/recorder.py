@@ -482,9 +482,7 @@ def write_card(
         tags=card_tags(cfg, extra_tags), dataset_info=dataset.meta.info, license=cfg.license, repo_id=cfg.repo_id,
         **dataset_card(dataset, cfg, command),
     )  # fmt: skip
-    tmp = Path(dataset.root) / "README.md.tmp"
-    tmp.write_text(str(card))
-    tmp.replace(Path(dataset.root) / "README.md")
+    write_atomic(Path(dataset.root) / "README.md", str(card))
 
 
 def push_dataset(

@@ -53,8 +53,6 @@ for _gym_id, _entry_point, _horizon in (
         gym.register(id=_gym_id, entry_point=_entry_point, max_episode_steps=_horizon)
 
 __all__ = [
-    "SimReachRobot",
-    "SimReachRobotConfig",
     "FETCH_PUSH_ID",
     "FETCH_REACH_ID",
     "FETCH_SLIDE_ID",
@@ -72,4 +70,6 @@ __all__ = [
     "RopePushEnvConfig",
     "SawyerGoalEnvConfig",
     "SawyerReachEnvConfig",
+    "SimReachRobot",
+    "SimReachRobotConfig",
 ]

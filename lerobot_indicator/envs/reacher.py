@@ -76,9 +76,12 @@ class ReacherEnv(GymGoalEnv):
     def _achieved_goal(self) -> np.ndarray:
         return self._agent_state()
 
+    def joints_reaching(self, xy: np.ndarray) -> np.ndarray:
+        """Joint angles (shoulder, elbow) putting the fingertip at world ``xy``: the goal configuration's IK."""
+        return two_link_ik(np.asarray(xy) - self._base_xy, self._l1, self._l2, self._elbow_limit)
+
     def _enter_goal_configuration(self) -> None:
-        goal = self._sampled_goal() - self._base_xy
-        self.data.qpos[self._arm_qpos] = two_link_ik(goal, self._l1, self._l2, self._elbow_limit)
+        self.data.qpos[self._arm_qpos] = self.joints_reaching(self._sampled_goal())
         self.data.qvel[self._arm_qvel] = 0.0
         self._mj.mj_forward(self.model, self.data)
 

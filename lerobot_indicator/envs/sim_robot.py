@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import cached_property
-from pathlib import Path
 
 import numpy as np
 from lerobot.robots import Robot, RobotConfig
@@ -107,8 +106,3 @@ class SimReachRobot(Robot):
         if self.env is not None:
             self.env.close()
             self.env = None
-
-
-def trace(path: str | Path) -> list[dict]:
-    """The lines a run with ``trace_path`` wrote."""
-    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]

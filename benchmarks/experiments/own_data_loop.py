@@ -407,7 +407,7 @@ def summarize(args, done: dict) -> None:
     env_only_done = read_stages(args.env_only_work)
 
     def command(key: str) -> str:
-        stages = env_only_done if key.rpartition("/")[2] in ENV_ONLY and key not in done else done
+        stages = done if key in done else env_only_done
         return " ".join(stages[key]["command"]) if key in stages else ""
 
     policies = {}
@@ -442,7 +442,7 @@ def summarize(args, done: dict) -> None:
         name: {
             "what": RUNS[name],
             "command": command(name),
-            "wall_s": (env_only_done if name in ENV_ONLY else done).get(name, {}).get("seconds"),
+            "wall_s": (done if name in done else env_only_done).get(name, {}).get("seconds"),
             "evaluations": [
                 {k: r[k] for k in logged if k in r}
                 for r in read_jsonl(work_of(args, name) / name / "metrics.jsonl")

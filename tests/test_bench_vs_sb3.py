@@ -144,6 +144,33 @@ def test_fetch_reach_task_runs_our_env_and_sb3_on_fetchreach_v4(tmp_path):
         vs_sb3.Settings(task="fetch_slide_state").validate()
 
 
+def test_fetch_push_task_runs_our_block_env_and_sb3_on_fetchpush_v4(tmp_path):
+    from benchmarks.experiments import vs_sb3
+
+    s = vs_sb3.Settings(task="fetch_push_state", env_steps=1000, eval_every=200)
+    s.validate()
+    cfg = vs_sb3.ours_config("ours_indicator", 0, s, tmp_path / "ours", s.steps())
+    assert (cfg.env.type, cfg.env.obs_type, cfg.env.episode_length, cfg.env.epsilon) == (
+        "fetch_push",
+        "state",
+        50,
+        0.05,
+    )
+    assert cfg.policy.observation_keys == ["observation.state"]
+    assert cfg.policy.context_keys == ["observation.environment_state"]
+    env = vs_sb3.make_sb3_env(s)
+    assert env.spec.id == "FetchPush-v4" and env.spec.max_episode_steps == 50
+    obs, _ = env.reset(seed=0)
+    assert obs["observation"].shape == (25,) and obs["desired_goal"].shape == (3,)
+    # its own reward: 0 within 0.05 m of the goal, else -1
+    goal = obs["desired_goal"]
+    near, far = goal + np.array([0.049, 0.0, 0.0]), goal + np.array([0.051, 0.0, 0.0])
+    assert env.unwrapped.compute_reward(np.stack([near, far]), np.stack([goal, goal]), {}).tolist() == [
+        0.0,
+        -1.0,
+    ]
+
+
 def test_sb3_on_fetchreach_v4_uses_its_own_reward_and_our_eval_protocol():
     pytest.importorskip("stable_baselines3")
     from benchmarks.experiments import vs_sb3

@@ -1,8 +1,9 @@
 """Side-by-side benchmark: Stable-Baselines3 DDPG + HER vs our online trainer on a state-based goal task.
 
 The learners, protocol and timing are ``benchmarks.experiments.vs_sb3``'s; this CLI picks the task
-(``--task reach_state``: the Sawyer reach, the default; ``--task fetch_reach_state``: gymnasium-robotics'
-``FetchReach-v4`` for SB3, ``--env.type=fetch_reach --env.obs_type=state`` for ours), seeds, budget and output.
+(``--task reach_state``: the Sawyer reach, the default; ``--task fetch_reach_state`` / ``fetch_push_state``:
+gymnasium-robotics' ``FetchReach-v4`` / ``FetchPush-v4`` for SB3, ``--env.type=fetch_reach`` / ``fetch_push``
+with ``--env.obs_type=state`` for ours), seeds, budget and output.
 Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``).
 
     python -m benchmarks.experiments.run_vs_sb3 [--task reach_state] [--seeds 0 1 2] [--env-steps 5000] \

@@ -1,8 +1,8 @@
 """Side by side: Stable-Baselines3 DDPG + HER and our online trainer on a state-based goal task.
 
-Tasks (``VS_TASKS``): the Sawyer reach (``reach_state``, T = 25) and gymnasium-robotics' FetchReach
-(``fetch_reach_state``, T = 50). Three learners, same simulator, same hyper-parameters where both have them
-(3x256 tanh MLPs, batch 256, Adam lr 1e-3, gamma = 1 - 1/T, target smoothing 0.98 (SB3 tau 0.02), one env,
+Tasks (``VS_TASKS``): the Sawyer reach (``reach_state``, T = 25) and gymnasium-robotics' FetchReach and
+FetchPush (``fetch_reach_state``, ``fetch_push_state``, T = 50). Three learners, same simulator, same
+hyper-parameters where both have them (3x256 tanh MLPs, batch 256, Adam lr 1e-3, gamma = 1 - 1/T, target smoothing 0.98 (SB3 tau 0.02), one env,
 the same episodes and gradient steps per cycle, the same env-step budget):
 
 * ``sb3_ddpg_her``: SB3 ``DDPG`` + ``HerReplayBuffer`` (``future``, 4 sampled goals) with the ground-truth
@@ -75,6 +75,7 @@ SB3_LEARNERS = ("sb3_ddpg_her", *SB3_VARIANTS)
 ALL_LEARNERS = (*LEARNERS, *SB3_VARIANTS)
 SUCCESS_TARGET = 0.9
 FETCH_REACH_ID = "FetchReach-v4"
+FETCH_PUSH_ID = "FetchPush-v4"
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,23 @@ VS_TASKS = {
             "(distance <= 0.05 m); ours indicator: +1 only when the grip point equals its goal bit for bit",
             "evaluation: the same seeds EVAL_SEED_OFFSET + i, but each env draws its own goals from them (the same "
             "distribution: FetchReach-v4's reset); success at the last step (SB3: FetchReach-v4's is_success)",
+        ],
+    ),
+    "fetch_push_state": VsTask(
+        50,
+        "FetchPush (state)",
+        FETCH_PUSH_ID,
+        [
+            "env: SB3 runs gymnasium-robotics' FetchPush-v4 itself; ours the same simulator through "
+            "--env.type=fetch_push (the same 4-d action, the gripper blocked), whose start is redrawn when the block "
+            "already lies within epsilon of the goal (FetchPush-v4 keeps them: 5.3% of 300 resets, so some of SB3's "
+            "evaluation episodes are solved at reset) and whose goal puts the block at FetchPush-v4's sampled goal",
+            "inputs: SB3 FetchPush-v4's observation (25), achieved_goal (3), desired_goal (3), 31-d; ours the block "
+            "centre (3, compared), its goal (3) and the wrapped observation as context (25), 31-d",
+            "reward: SB3 FetchPush-v4's own compute_reward, 0 if distance < 0.05 m else -1; ours oracle +1/-1 "
+            "(distance <= 0.05 m); ours indicator: +1 only when the block centre equals its goal bit for bit",
+            "evaluation: the same seeds EVAL_SEED_OFFSET + i, but each env draws its own starts and goals from them "
+            "(the same distribution but for the redrawn solved starts); success at the last step",
         ],
     ),
 }

@@ -312,6 +312,13 @@ TASKS["fetch_reach_state"] = TaskPreset(
 TASKS["fetch_push_state"] = TaskPreset(
     ["--env.type=fetch_push", "--env.obs_type=state", *FETCH_T_EPS, *GYM_STATE_KEYS], 40000, 40, 2, 2000, 20
 )
+# FetchPush with the data-to-update ratio of baselines' HER on 8 MPI workers (2 episodes each per cycle, 40
+# updates of their averaged batch-256 gradients): 16 episodes and 40 updates of batch 2048 per cycle, 0.05 updates
+# per env step. Single-worker HER does not learn FetchPush (TianhongDai/hindsight-experience-replay#19).
+# 50,000 updates = 1M env steps.
+TASKS["fetch_push_state_8workers"] = TaskPreset(
+    [*TASKS["fetch_push_state"].env_args, "--online.batch_size=2048"], 50000, 40, 16, 400, 20
+)
 # Visual: one update per env step, as reach_rgbd; 100x100 as the paper's table.
 TASKS["fetch_reach_rgbd"] = TaskPreset(
     ["--env.type=fetch_reach", "--env.obs_type=rgbd", *FETCH_T_EPS, RGBD_KEYS], 20000, 100, 2, 1000, 20

@@ -1,5 +1,8 @@
 """The SB3 GoalEnv adapter of ``benchmarks/experiments/run_vs_sb3.py``: vectorised reward and a few SB3 DDPG+HER steps."""
 
+import dataclasses
+import json
+
 import numpy as np
 import pytest
 
@@ -263,3 +266,62 @@ def test_sb3_td3_and_zoo_sac_learners_are_built_with_their_settings():
     assert sac.ent_coef == "auto" and sac.train_freq.frequency == 1 and sac.gradient_steps == 1
     sac.learn(total_timesteps=50)
     assert sac.get_env().envs[0].unwrapped.spec.id == "FetchReach-v4" and sac._n_updates == 0
+
+
+def test_eval_curve_state_resumes_and_a_redone_cycle_replaces_its_evaluation(monkeypatch, tmp_path):
+    from benchmarks.experiments import vs_sb3
+    from lerobot_indicator.training.hooks import PhaseEnd
+
+    state = tmp_path / "timing.json"
+    # cycle start and its save, eval end and its save, next cycle start's save (then the process dies)
+    clock = iter([10.0, 10.0, 15.0, 15.0, 16.0])
+    monkeypatch.setattr(vs_sb3.time, "perf_counter", lambda: next(clock))
+    first = vs_sb3.EvalCurve(state).hooks()
+    first.on_cycle_start(0)
+    first.on_collect_end(PhaseEnd(0, 0, 50, 1.0), [])
+    first.on_eval_end(PhaseEnd(0, 40, 50, 3.0), {"eval_success_rate": 0.5})  # evaluated from 12 to 15
+    first.on_cycle_start(1)  # 6 s after the start, 3 of them evaluating
+    # The new process resumes at cycle 1, and again at cycle 0 (its resume state was older than timing.json).
+    clock = iter([100.0, 100.0, 104.0, 104.0])
+    monkeypatch.setattr(vs_sb3.time, "perf_counter", lambda: next(clock))
+    timing = vs_sb3.EvalCurve(state)
+    assert (timing.eval_s, timing.collect_s) == (3.0, 1.0)
+    hooks = timing.hooks()
+    hooks.on_cycle_start(0)  # the clock goes on from 6 s: start = 94
+    hooks.on_eval_end(PhaseEnd(0, 40, 50, 2.0), {"eval_success_rate": 0.7})  # from 102 to 104
+    assert [(c["env_steps"], c["eval_success_rate"]) for c in timing.curve] == [(50, 0.7)]
+    assert timing.curve[0]["train_wall_s"] == 102.0 - 94.0 - 3.0
+    assert json.loads(state.read_text())["curve"] == timing.curve
+
+
+def test_a_run_resumes_from_its_state_and_a_finished_one_is_read_back(tmp_path):
+    from benchmarks.experiments import vs_sb3
+
+    small = {"eval_every": 50, "eval_episodes": 1, "updates_per_cycle": 2, "batch_size": 16}
+    state = tmp_path / "reach_state" / "ours_indicator" / "seed_0"
+    first = vs_sb3.run_learner("ours_indicator", 0, vs_sb3.Settings(env_steps=50, **small), state)
+    run = vs_sb3.run_learner("ours_indicator", 0, vs_sb3.Settings(env_steps=100, **small), state)
+    assert [(c["env_steps"], c["updates"]) for c in run["curve"]] == [(50, 2), (100, 4)]
+    assert run["curve"][0] == first["curve"][0]  # continued: the first evaluation was not run again
+    assert run["updates"] == 4 and run["curve"][1]["train_wall_s"] > run["curve"][0]["train_wall_s"]
+    s = vs_sb3.Settings(env_steps=100, **small)
+    (state / "run.json").write_text(json.dumps(run | {"settings": dataclasses.asdict(s)}))
+    assert vs_sb3.run_in_subprocess("ours_indicator", 0, s, tmp_path)["curve"] == run["curve"]
+    with pytest.raises(ValueError, match="other settings"):
+        vs_sb3.run_in_subprocess("ours_indicator", 0, vs_sb3.Settings(env_steps=200, **small), tmp_path)
+
+
+def test_sb3_run_resumes_from_its_state(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from benchmarks.experiments import vs_sb3
+
+    small = {"eval_every": 50, "eval_episodes": 1, "updates_per_cycle": 2, "batch_size": 16}
+    first = vs_sb3.run_sb3(0, vs_sb3.Settings(env_steps=50, **small), "sb3_td3_her", tmp_path)
+    run = vs_sb3.run_sb3(0, vs_sb3.Settings(env_steps=100, **small), "sb3_td3_her", tmp_path)
+    assert [(c["env_steps"], c["updates"]) for c in run["curve"]] == [(50, 2), (100, 4)]
+    assert run["curve"][0] == first["curve"][0]  # continued: the first evaluation was not run again
+    assert sorted(p.name for p in (tmp_path / "ckpt").iterdir()) == [
+        "model.zip",
+        "progress.json",
+        "replay_buffer.pkl",
+    ]

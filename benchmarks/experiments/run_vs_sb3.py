@@ -35,6 +35,12 @@ def main() -> None:
             p.add_argument(flag, type={"int": int, "float": float}[f.type], default=f.default)
     p.add_argument("--skip-training", action="store_true", help="only the update-throughput benchmark")
     p.add_argument("--out-dir", type=Path, default=Path("docs/results"))
+    p.add_argument(
+        "--runs-dir",
+        type=Path,
+        help="keep every run's resume state and result here: the same command continues an interrupted "
+        "benchmark, and runs split over several commands (--seeds, --methods) are gathered by one more",
+    )
     args = p.parse_args()
     settings = Settings(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Settings)})
     try:
@@ -42,7 +48,9 @@ def main() -> None:
     except ValueError as e:
         p.error(str(e))
     command = command_line()
-    record = run_benchmark(args.seeds, args.methods, settings, args.out_dir, command, args.skip_training)
+    record = run_benchmark(
+        args.seeds, args.methods, settings, args.out_dir, command, args.skip_training, args.runs_dir
+    )
     print(json.dumps(record["summary"], indent=1))
 
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -265,13 +266,63 @@ def evaluate_sb3(model, env, n_episodes: int, horizon: int) -> dict[str, float]:
     return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
 
 
-def run_sb3(seed: int, s: Settings, learner: str) -> dict:
+SB3_CLASSES = {
+    "sb3_ddpg_her": "DDPG",
+    "sb3_ddpg_her_norm": "DDPG",
+    "sb3_td3_her": "TD3",
+    "sb3_sac_her_zoo": "SAC",
+}
+
+
+def save_sb3_state(model, state_dir: Path, progress: dict) -> None:
+    """The run's resume state (weights, optimisers, noise, replay buffer, ``VecNormalize`` statistics, curve and
+    clocks) in ``state_dir/ckpt``, written beside the previous one and swapped in, so an interruption at any
+    moment leaves one complete state."""
+    new, cur, old = state_dir / "ckpt.new", state_dir / "ckpt", state_dir / "ckpt.old"
+    shutil.rmtree(new, ignore_errors=True)
+    new.mkdir(parents=True)
+    model.save(new / "model.zip")
+    model.save_replay_buffer(new / "replay_buffer.pkl")
+    if (normalizer := model.get_vec_normalize_env()) is not None:
+        normalizer.save(str(new / "vec_normalize.pkl"))
+    (new / "progress.json").write_text(json.dumps(progress))
+    shutil.rmtree(old, ignore_errors=True)
+    if cur.exists():
+        cur.rename(old)
+    new.rename(cur)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def load_sb3_state(seed: int, s: Settings, learner: str, state_dir: Path):
+    """``(model, progress)`` from the newest complete state in ``state_dir``, or ``(None, None)``."""
+    ckpt = next(
+        (d for d in (state_dir / "ckpt", state_dir / "ckpt.old") if (d / "progress.json").exists()), None
+    )
+    if ckpt is None:
+        return None, None
+    import stable_baselines3
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    env = make_sb3_env(s)
+    if (ckpt / "vec_normalize.pkl").exists():
+        env = VecNormalize.load(str(ckpt / "vec_normalize.pkl"), DummyVecEnv([lambda: env]))
+    model = getattr(stable_baselines3, SB3_CLASSES[learner]).load(ckpt / "model.zip", env=env, device="cpu")
+    model.load_replay_buffer(ckpt / "replay_buffer.pkl")
+    return model, json.loads((ckpt / "progress.json").read_text())
+
+
+def run_sb3(seed: int, s: Settings, learner: str, state_dir: Path | None = None) -> dict:
+    """One SB3 run. With ``state_dir`` it writes its resume state after every evaluation and, started again,
+    continues from the last one (the env restarts at an episode boundary, as the state was written between
+    cycles; the random streams are not restored)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    model = make_sb3(seed, s, learner=learner)
+    model, progress = load_sb3_state(seed, s, learner, state_dir) if state_dir else (None, None)
+    model = model or make_sb3(seed, s, learner=learner)
+    progress = progress or {"curve": [], "eval_s": 0.0, "collect_s": 0.0, "elapsed_s": 0.0}
     eval_env = make_sb3_env(s)
-    curve: list[dict] = []
-    clock = {"eval": 0.0, "collect": 0.0, "rollout_t0": 0.0, "start": 0.0}
+    curve: list[dict] = progress["curve"]
+    clock = {"eval": progress["eval_s"], "collect": progress["collect_s"], "rollout_t0": 0.0, "start": 0.0}
 
     def do_eval() -> None:
         t0 = time.perf_counter()
@@ -286,12 +337,24 @@ def run_sb3(seed: int, s: Settings, learner: str) -> dict:
                 **result,
             }
         )
+        if state_dir:
+            elapsed = time.perf_counter() - clock["start"]
+            save_sb3_state(
+                model,
+                state_dir,
+                {
+                    "curve": curve,
+                    "eval_s": clock["eval"],
+                    "collect_s": clock["collect"],
+                    "elapsed_s": elapsed,
+                },
+            )
 
     class Timer(BaseCallback):
         """Rollout start = the previous cycle's gradient steps are done: evaluate there (as ours does)."""
 
         def _on_training_start(self) -> None:
-            clock["start"] = time.perf_counter()
+            clock["start"] = time.perf_counter() - progress["elapsed_s"]
 
         def _on_rollout_start(self) -> None:
             n = self.model.num_timesteps
@@ -305,8 +368,12 @@ def run_sb3(seed: int, s: Settings, learner: str) -> dict:
         def _on_step(self) -> bool:
             return True
 
-    model.learn(total_timesteps=s.env_steps, callback=Timer())
-    do_eval()  # after the last cycle's gradient steps
+    remaining = s.env_steps - int(model.num_timesteps)
+    if remaining > 0:
+        model.learn(total_timesteps=remaining, callback=Timer(), reset_num_timesteps=not curve)
+    if not curve or curve[-1]["env_steps"] != model.num_timesteps:
+        clock["start"] = clock["start"] or time.perf_counter() - progress["elapsed_s"]
+        do_eval()  # after the last cycle's gradient steps
     return {"curve": curve, "collect_wall_s": clock["collect"], "updates": int(model._n_updates)}
 
 
@@ -338,26 +405,35 @@ def ours_cli(learner: str, seed: int, s: Settings, steps: int) -> list[str]:
     ]
 
 
-def ours_config(learner: str, seed: int, s: Settings, output_dir: Path, steps: int):
+def ours_config(learner: str, seed: int, s: Settings, output_dir: Path, steps: int, resume: bool = False):
     import draccus
 
     from lerobot_indicator.training.config import OnlineTrainConfig
 
-    cfg = draccus.parse(
-        OnlineTrainConfig, args=[*ours_cli(learner, seed, s, steps), f"--output_dir={output_dir}"]
-    )
+    args = [
+        *ours_cli(learner, seed, s, steps),
+        f"--output_dir={output_dir}",
+        f"--resume={str(resume).lower()}",
+    ]
+    cfg = draccus.parse(OnlineTrainConfig, args=args)
     cfg.validate()
     return cfg
 
 
 class EvalCurve:
     """Trainer hooks that record the eval curve against the training wall-clock (evaluation excluded) and the
-    time spent collecting and optimising."""
+    time spent collecting and optimising. With ``state``, a JSON file, they continue from it and write it at
+    every cycle start (just after the trainer wrote its own resume state) and evaluation."""
 
-    def __init__(self) -> None:
-        self.curve: list[dict] = []
+    def __init__(self, state: Path | None = None) -> None:
+        saved = json.loads(state.read_text()) if state and state.exists() else {}
+        self.state = state
+        self.curve: list[dict] = saved.get("curve", [])
         self.start: float | None = None
-        self.eval_s = self.collect_s = self.optimise_s = 0.0
+        self.elapsed = saved.get("elapsed_s", 0.0)
+        self.eval_s, self.collect_s, self.optimise_s = (
+            saved.get(k, 0.0) for k in ("eval_s", "collect_s", "optimise_s")
+        )
 
     def hooks(self) -> TrainerHooks:
         return TrainerHooks(
@@ -369,7 +445,19 @@ class EvalCurve:
 
     def _cycle_start(self, cycle: int) -> None:
         if self.start is None:
-            self.start = time.perf_counter()
+            self.start = time.perf_counter() - self.elapsed
+        self._save()
+
+    def _save(self) -> None:
+        if self.state:
+            saved = {
+                "curve": self.curve,
+                "elapsed_s": time.perf_counter() - self.start,
+                "eval_s": self.eval_s,
+            }
+            tmp = self.state.with_suffix(".tmp")
+            tmp.write_text(json.dumps(saved | {"collect_s": self.collect_s, "optimise_s": self.optimise_s}))
+            tmp.replace(self.state)
 
     def _collect_end(self, phase: PhaseEnd, rollouts: object) -> None:
         self.collect_s += phase.seconds
@@ -380,17 +468,26 @@ class EvalCurve:
     def _eval_end(self, phase: PhaseEnd, metrics: dict[str, float]) -> None:
         train_wall = time.perf_counter() - phase.seconds - self.start - self.eval_s
         self.eval_s += phase.seconds
+        # A cycle redone after an interruption evaluates again: its new result replaces the saved one.
+        self.curve = [c for c in self.curve if c["env_steps"] < phase.env_steps]
         self.curve.append(
             {"env_steps": phase.env_steps, "updates": phase.step, "train_wall_s": train_wall, **metrics}
         )
+        self._save()
 
 
-def run_ours(learner: str, seed: int, s: Settings) -> dict:
+def run_ours(learner: str, seed: int, s: Settings, state_dir: Path | None = None) -> dict:
+    """One of our runs. With ``state_dir`` the trainer keeps its resume state there and, started again,
+    continues from it (``--resume=true``), the curve and clocks with it."""
     from lerobot_indicator.training.online import OnlineTrainer, apply_process_settings
 
-    timing = EvalCurve()
     with tempfile.TemporaryDirectory() as tmp:
-        trainer = OnlineTrainer(ours_config(learner, seed, s, Path(tmp) / "run", s.steps()), timing.hooks())
+        root = state_dir or Path(tmp)
+        root.mkdir(parents=True, exist_ok=True)
+        timing = EvalCurve(root / "timing.json" if state_dir else None)
+        resume = any((root / "run" / d).exists() for d in ("resume", "resume.old"))
+        cfg = ours_config(learner, seed, s, root / "run", s.steps(), resume)
+        trainer = OnlineTrainer(cfg, timing.hooks())
         apply_process_settings(trainer.cfg)  # as lerobot-indicator-train does
         try:
             trainer.train()
@@ -405,21 +502,37 @@ def run_ours(learner: str, seed: int, s: Settings) -> dict:
     }
 
 
-def run_learner(learner: str, seed: int, s: Settings) -> dict:
+def run_learner(learner: str, seed: int, s: Settings, state_dir: Path | None = None) -> dict:
     torch.set_num_threads(s.threads)
     t0 = time.perf_counter()
-    run = run_sb3(seed, s, learner) if learner in SB3_LEARNERS else run_ours(learner, seed, s)
+    run = (run_sb3 if learner in SB3_LEARNERS else run_ours)(
+        learner=learner, seed=seed, s=s, state_dir=state_dir
+    )
     run["process_wall_s"] = time.perf_counter() - t0
     return run
 
 
-def run_in_subprocess(learner: str, seed: int, s: Settings) -> dict:
-    """One training run in a fresh process (``python -m benchmarks.experiments.vs_sb3``)."""
+def run_in_subprocess(learner: str, seed: int, s: Settings, runs_dir: Path | None = None) -> dict:
+    """One training run in a fresh process (``python -m benchmarks.experiments.vs_sb3``). With ``runs_dir`` the
+    run keeps its resume state in ``runs_dir/<task>/<learner>/seed_<seed>`` and its result in ``run.json``
+    there: a finished run is read back, an interrupted one continues."""
+    state_dir = runs_dir / s.task / learner / f"seed_{seed}" if runs_dir else None
+    if state_dir and (state_dir / "run.json").exists():
+        run = json.loads((state_dir / "run.json").read_text())
+        if run["settings"] != asdict(s):
+            raise ValueError(
+                f"{state_dir / 'run.json'}: made with other settings than these; use another --runs-dir"
+            )
+        return run
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
-        request = json.dumps({"learner": learner, "seed": seed, "settings": asdict(s), "out": str(out)})
-        subprocess.run([sys.executable, "-m", __name__, request], check=True, cwd=REPO)
-        return json.loads(out.read_text())
+        request = {"learner": learner, "seed": seed, "settings": asdict(s), "out": str(out)}
+        request["state_dir"] = str(state_dir) if state_dir else None
+        subprocess.run([sys.executable, "-m", __name__, json.dumps(request)], check=True, cwd=REPO)
+        run = json.loads(out.read_text()) | {"settings": asdict(s)}
+    if state_dir:
+        (state_dir / "run.json").write_text(json.dumps(run))
+    return run
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -617,13 +730,15 @@ def ratios(runs: list[dict], learners: list[str]) -> dict:
     return out
 
 
-def training_runs(seeds: list[int], learners: list[str], s: Settings) -> list[dict]:
+def training_runs(
+    seeds: list[int], learners: list[str], s: Settings, runs_dir: Path | None = None
+) -> list[dict]:
     """Every (seed, learner) run in its own process, interleaved seed by seed so machine noise hits all
-    learners alike."""
+    learners alike; with ``runs_dir`` each one resumes (``run_in_subprocess``)."""
     runs = []
     for seed in seeds:
         for learner in learners:
-            run = run_in_subprocess(learner, seed, s)
+            run = run_in_subprocess(learner, seed, s, runs_dir)
             run |= {"method": learner, "seed": seed, "summary": summarise_run(run)}
             runs.append(run)
             print(f"{learner} seed {seed}: {json.dumps(run['summary'])}", flush=True)
@@ -720,7 +835,13 @@ def plot(record: dict, png: Path) -> None:
 
 
 def run_benchmark(
-    seeds: list[int], learners: list[str], s: Settings, out_dir: Path, command: str, skip_training: bool
+    seeds: list[int],
+    learners: list[str],
+    s: Settings,
+    out_dir: Path,
+    command: str,
+    skip_training: bool,
+    runs_dir: Path | None = None,
 ) -> dict:
     """The update benchmark, then (unless ``skip_training``) every training run; writes ``vs_sb3.json`` and
     ``vs_sb3.png``, or ``vs_sb3_updates.json`` for the update benchmark alone (never replacing a full run)."""
@@ -731,7 +852,7 @@ def run_benchmark(
     t_start = time.perf_counter()
     torch.set_num_threads(s.threads)
     update_throughput = bench_updates(s)
-    runs = [] if skip_training else training_runs(seeds, learners, s)
+    runs = [] if skip_training else training_runs(seeds, learners, s, runs_dir)
     record = {
         "command": command,
         "machine": {"cpus": os.cpu_count(), "cpu": cpu_model()},
@@ -778,7 +899,8 @@ def run_benchmark(
 def main() -> None:
     """A single training run, as ``run_in_subprocess`` asks for it (one JSON argument)."""
     request = json.loads(sys.argv[1])
-    run = run_learner(request["learner"], request["seed"], Settings(**request["settings"]))
+    state_dir = Path(request["state_dir"]) if request.get("state_dir") else None
+    run = run_learner(request["learner"], request["seed"], Settings(**request["settings"]), state_dir)
     Path(request["out"]).write_text(json.dumps(run))
 
 

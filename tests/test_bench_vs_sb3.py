@@ -1,6 +1,5 @@
 """The SB3 GoalEnv adapter of ``benchmarks/experiments/run_vs_sb3.py``: vectorised reward and a few SB3 DDPG+HER steps."""
 
-import dataclasses
 import json
 
 import numpy as np
@@ -300,15 +299,34 @@ def test_a_run_resumes_from_its_state_and_a_finished_one_is_read_back(tmp_path):
     small = {"eval_every": 50, "eval_episodes": 1, "updates_per_cycle": 2, "batch_size": 16}
     state = tmp_path / "reach_state" / "ours_indicator" / "seed_0"
     first = vs_sb3.run_learner("ours_indicator", 0, vs_sb3.Settings(env_steps=50, **small), state)
+    [so_far] = vs_sb3.runs_so_far(
+        [0, 1], ["ours_indicator"], vs_sb3.Settings(env_steps=100, **small), tmp_path
+    )
+    assert (so_far["finished"], so_far["curve"], so_far["updates"]) == (False, first["curve"], 2)
+    record = vs_sb3.run_benchmark(
+        [0],
+        ["ours_indicator"],
+        vs_sb3.Settings(env_steps=100, **small),
+        tmp_path / "out",
+        "cmd",
+        False,
+        tmp_path,
+        True,
+    )
+    assert record["update_throughput"] is None and record["runs"][0]["finished"] is False
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["vs_sb3_so_far.json", "vs_sb3_so_far.png"]
     run = vs_sb3.run_learner("ours_indicator", 0, vs_sb3.Settings(env_steps=100, **small), state)
     assert [(c["env_steps"], c["updates"]) for c in run["curve"]] == [(50, 2), (100, 4)]
     assert run["curve"][0] == first["curve"][0]  # continued: the first evaluation was not run again
     assert run["updates"] == 4 and run["curve"][1]["train_wall_s"] > run["curve"][0]["train_wall_s"]
     s = vs_sb3.Settings(env_steps=100, **small)
-    (state / "run.json").write_text(json.dumps(run | {"settings": dataclasses.asdict(s)}))
+    (state / "run.json").write_text(json.dumps(run))
     assert vs_sb3.run_in_subprocess("ours_indicator", 0, s, tmp_path)["curve"] == run["curve"]
+    assert vs_sb3.runs_so_far([0], ["ours_indicator"], s, tmp_path)[0]["finished"] is True
     with pytest.raises(ValueError, match="other settings"):
         vs_sb3.run_in_subprocess("ours_indicator", 0, vs_sb3.Settings(env_steps=200, **small), tmp_path)
+    with pytest.raises(ValueError, match="other settings"):
+        vs_sb3.runs_so_far([0], ["ours_indicator"], vs_sb3.Settings(env_steps=200, **small), tmp_path)
 
 
 def test_sb3_run_resumes_from_its_state(tmp_path):

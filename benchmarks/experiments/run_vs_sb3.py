@@ -4,7 +4,8 @@ The learners, protocol and timing are ``benchmarks.experiments.vs_sb3``'s; this 
 (``--task reach_state``: the Sawyer reach, the default; ``--task fetch_reach_state`` / ``fetch_push_state``:
 gymnasium-robotics' ``FetchReach-v4`` / ``FetchPush-v4`` for SB3, ``--env.type=fetch_reach`` / ``fetch_push``
 with ``--env.obs_type=state`` for ours), seeds, budget and output.
-Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``).
+Writes ``vs_sb3.json`` and ``vs_sb3.png`` (``--skip-training``: ``vs_sb3_updates.json``; ``--so-far``: the
+runs of ``--runs-dir`` as far as they got, ``vs_sb3_so_far.json`` / ``.png``).
 
     python -m benchmarks.experiments.run_vs_sb3 [--task reach_state] [--seeds 0 1 2] [--env-steps 5000] \
         [--eval-every 250] [--threads 1]
@@ -34,6 +35,11 @@ def main() -> None:
         else:
             p.add_argument(flag, type={"int": int, "float": float}[f.type], default=f.default)
     p.add_argument("--skip-training", action="store_true", help="only the update-throughput benchmark")
+    p.add_argument(
+        "--so-far",
+        action="store_true",
+        help="train nothing: gather the runs of --runs-dir as far as they got (vs_sb3_so_far.json / .png)",
+    )
     p.add_argument("--out-dir", type=Path, default=Path("docs/results"))
     p.add_argument(
         "--runs-dir",
@@ -47,9 +53,18 @@ def main() -> None:
         settings.validate()
     except ValueError as e:
         p.error(str(e))
+    if args.so_far and args.runs_dir is None:
+        p.error("--so-far gathers the runs of --runs-dir: name it")
     command = command_line()
     record = run_benchmark(
-        args.seeds, args.methods, settings, args.out_dir, command, args.skip_training, args.runs_dir
+        args.seeds,
+        args.methods,
+        settings,
+        args.out_dir,
+        command,
+        args.skip_training,
+        args.runs_dir,
+        args.so_far,
     )
     print(json.dumps(record["summary"], indent=1))
 

@@ -512,24 +512,34 @@ def run_learner(learner: str, seed: int, s: Settings, state_dir: Path | None = N
     return run
 
 
+def run_state_dir(runs_dir: Path, s: Settings, learner: str, seed: int, claim: bool = False) -> Path:
+    """``runs_dir/<task>/<learner>/seed_<seed>``, checked against ``s`` through its ``settings.json``, which
+    ``claim`` writes for a new run: a run never continues, nor is it gathered, under other settings."""
+    state_dir = runs_dir / s.task / learner / f"seed_{seed}"
+    recorded = state_dir / "settings.json"
+    if recorded.exists() and json.loads(recorded.read_text()) != asdict(s):
+        raise ValueError(
+            f"{recorded}: the run was made with other settings than these; use another --runs-dir"
+        )
+    if claim and not recorded.exists():
+        state_dir.mkdir(parents=True, exist_ok=True)
+        recorded.write_text(json.dumps(asdict(s)))
+    return state_dir
+
+
 def run_in_subprocess(learner: str, seed: int, s: Settings, runs_dir: Path | None = None) -> dict:
     """One training run in a fresh process (``python -m benchmarks.experiments.vs_sb3``). With ``runs_dir`` the
-    run keeps its resume state in ``runs_dir/<task>/<learner>/seed_<seed>`` and its result in ``run.json``
-    there: a finished run is read back, an interrupted one continues."""
-    state_dir = runs_dir / s.task / learner / f"seed_{seed}" if runs_dir else None
+    run keeps its resume state in ``run_state_dir`` and its result in ``run.json`` there: a finished run is read
+    back, an interrupted one continues."""
+    state_dir = run_state_dir(runs_dir, s, learner, seed, claim=True) if runs_dir else None
     if state_dir and (state_dir / "run.json").exists():
-        run = json.loads((state_dir / "run.json").read_text())
-        if run["settings"] != asdict(s):
-            raise ValueError(
-                f"{state_dir / 'run.json'}: made with other settings than these; use another --runs-dir"
-            )
-        return run
+        return json.loads((state_dir / "run.json").read_text())
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "run.json"
         request = {"learner": learner, "seed": seed, "settings": asdict(s), "out": str(out)}
         request["state_dir"] = str(state_dir) if state_dir else None
         subprocess.run([sys.executable, "-m", __name__, json.dumps(request)], check=True, cwd=REPO)
-        run = json.loads(out.read_text()) | {"settings": asdict(s)}
+        run = json.loads(out.read_text())
     if state_dir:
         (state_dir / "run.json").write_text(json.dumps(run))
     return run
@@ -730,6 +740,28 @@ def ratios(runs: list[dict], learners: list[str]) -> dict:
     return out
 
 
+def runs_so_far(seeds: list[int], learners: list[str], s: Settings, runs_dir: Path) -> list[dict]:
+    """Every run of ``runs_dir`` as far as it got, without training: a finished run's ``run.json``, else the
+    curve and clocks of its last resume state (``finished: false``); runs never started are left out."""
+    runs = []
+    for seed in seeds:
+        for learner in learners:
+            state_dir = run_state_dir(runs_dir, s, learner, seed)
+            if (state_dir / "run.json").exists():
+                run = json.loads((state_dir / "run.json").read_text()) | {"finished": True}
+            else:
+                saved = [state_dir / "timing.json", state_dir / "ckpt" / "progress.json"]
+                saved += [state_dir / "ckpt.old" / "progress.json"]
+                state = next((json.loads(f.read_text()) for f in saved if f.exists()), None)
+                if state is None or not state["curve"]:
+                    continue
+                run = {"curve": state["curve"], "collect_wall_s": state["collect_s"], "finished": False}
+                run["updates"] = state["curve"][-1]["updates"]
+            run |= {"method": learner, "seed": seed, "summary": summarise_run(run)}
+            runs.append(run)
+    return runs
+
+
 def training_runs(
     seeds: list[int], learners: list[str], s: Settings, runs_dir: Path | None = None
 ) -> list[dict]:
@@ -743,6 +775,21 @@ def training_runs(
             runs.append(run)
             print(f"{learner} seed {seed}: {json.dumps(run['summary'])}", flush=True)
     return runs
+
+
+def plot_updates(ax, upd: dict, colors: dict[str, str]) -> None:
+    """The update-throughput bars: SB3 and our two learners."""
+    names = ["SB3 DDPG+HER", "ours oracle", "ours indicator"]
+    vals = [
+        upd["ours_indicator"]["sb3_updates_per_s"],
+        upd["ours_oracle"]["ours_updates_per_s"],
+        upd["ours_indicator"]["ours_updates_per_s"],
+    ]
+    ax.bar(names, vals, color=[colors[m] for m in LEARNERS])
+    ax.set_ylabel("gradient updates/s")
+    ax.set_title(f"batch {upd['batch_size']}, CPU, incl. replay sampling", fontsize=9)
+    for i, v in enumerate(vals):
+        ax.text(i, v, f"{v:.1f}", ha="center", va="bottom")
 
 
 def plot(record: dict, png: Path) -> None:
@@ -789,38 +836,36 @@ def plot(record: dict, png: Path) -> None:
         ax.set_ylabel("eval success rate")
         ax.set_ylim(-0.02, 1.02)
         ax.legend(fontsize=7)
-    upd = record["update_throughput"]
-    names = ["SB3 DDPG+HER", "ours oracle", "ours indicator"]
-    vals = [
-        upd["ours_indicator"]["sb3_updates_per_s"],
-        upd["ours_oracle"]["ours_updates_per_s"],
-        upd["ours_indicator"]["ours_updates_per_s"],
-    ]
-    axes[2].bar(names, vals, color=[colors[m] for m in LEARNERS])
-    axes[2].set_ylabel("gradient updates/s")
-    axes[2].set_title(f"batch {upd['batch_size']}, CPU, incl. replay sampling", fontsize=9)
-    for i, v in enumerate(vals):
-        axes[2].text(i, v, f"{v:.1f}", ha="center", va="bottom")
+    if record["update_throughput"] is None:  # --so-far: runs gathered, no update benchmark
+        axes[2].text(0.5, 0.5, "update throughput not measured (--so-far)", ha="center", va="center")
+        axes[2].set_axis_off()
+    else:
+        plot_updates(axes[2], record["update_throughput"], colors)
     # Env steps to 90% success: each seed's first hit (x at the budget: never), the mean curve's first hit.
     ax, budget = axes[3], record["env_steps_budget"]
     hits = record.get("ratios", {}).get("env_steps_to_90_mean_curve", {})
     drawn = [m for m in ALL_LEARNERS if any(r["method"] == m for r in record["runs"])]
     for i, learner in enumerate(drawn):
-        seeds = [r["summary"]["env_steps_to_90"] for r in record["runs"] if r["method"] == learner]
-        reached = [x for x in seeds if x is not None]
+        mine = [r for r in record["runs"] if r["method"] == learner]
+        reached = [
+            r["summary"]["env_steps_to_90"] for r in mine if r["summary"]["env_steps_to_90"] is not None
+        ]
+        missed = [r for r in mine if r["summary"]["env_steps_to_90"] is None]
+        never = [budget for r in missed if r.get("finished", True)]
+        # An unfinished run that has not reached it yet: a triangle at the env steps it got to.
+        so_far = [r["curve"][-1]["env_steps"] for r in missed if not r.get("finished", True)]
         if hits.get(learner) is not None:
             ax.bar(i, hits[learner], color=colors[learner], alpha=0.6)
             ax.text(i, hits[learner], f"{hits[learner]}", ha="center", va="bottom")
         ax.scatter([i] * len(reached), reached, color="k", s=14, zorder=3)
-        ax.scatter(
-            [i] * (len(seeds) - len(reached)), [budget] * (len(seeds) - len(reached)), marker="x", color="k"
-        )
+        ax.scatter([i] * len(never), never, marker="x", color="k")
+        ax.scatter([i] * len(so_far), so_far, marker="^", facecolors="none", edgecolors="k")
     ax.set_xticks(range(len(drawn)), [labels[m].split(" (")[0] for m in drawn], fontsize=7)
     ax.set_ylabel(f"env steps to {SUCCESS_TARGET:.0%} success")
     ratio = record.get("ratios", {}).get("ours_indicator_over_sb3", {})
     fmt = lambda x: "-" if x is None else f"{x:.2f}"  # noqa: E731
     ax.set_title(
-        f"bar: mean-over-seeds curve, dots: seeds (x: never)\nours indicator / SB3: {fmt(ratio.get('mean_curve'))} "
+        f"bar: mean-over-seeds curve, dots: seeds (x: never, triangle: not yet, unfinished)\nours indicator / SB3: {fmt(ratio.get('mean_curve'))} "
         f"(mean curve), {fmt(ratio.get('mean_of_seeds'))} (mean of seeds)",
         fontsize=9,
     )
@@ -828,6 +873,11 @@ def plot(record: dict, png: Path) -> None:
         f"{VS_TASKS[record.get('task', 'reach_state')].title}: SB3 {record['versions']['stable_baselines3']} vs lerobot-indicator, "
         f"seeds {record['seeds']}, {record['env_steps_budget']} env steps, "
         f"torch threads {record['torch_threads']}"
+        + "".join(
+            f"\n{r['method']} seed {r['seed']} unfinished: {r['curve'][-1]['env_steps']} env steps so far"
+            for r in record["runs"]
+            if r.get("finished") is False
+        )
     )
     fig.tight_layout()
     fig.savefig(png, dpi=110)
@@ -842,17 +892,32 @@ def run_benchmark(
     command: str,
     skip_training: bool,
     runs_dir: Path | None = None,
+    so_far: bool = False,
 ) -> dict:
     """The update benchmark, then (unless ``skip_training``) every training run; writes ``vs_sb3.json`` and
-    ``vs_sb3.png``, or ``vs_sb3_updates.json`` for the update benchmark alone (never replacing a full run)."""
-    import stable_baselines3
+    ``vs_sb3.png``, or ``vs_sb3_updates.json`` for the update benchmark alone (never replacing a full run). With
+    ``so_far``: neither, only the runs of ``runs_dir`` as far as they got, in ``vs_sb3_so_far.json`` / ``.png``."""
+    from importlib.metadata import PackageNotFoundError, version
 
+    try:
+        sb3_version = version("stable-baselines3")
+    except PackageNotFoundError:
+        if not so_far:  # gathering finished curves needs no SB3
+            raise
+        sb3_version = None
     s.validate()
     load_start = os.getloadavg()
     t_start = time.perf_counter()
     torch.set_num_threads(s.threads)
-    update_throughput = bench_updates(s)
-    runs = [] if skip_training else training_runs(seeds, learners, s, runs_dir)
+    if so_far:
+        if runs_dir is None:
+            raise ValueError("--so-far reads the runs of --runs-dir: name it")
+        update_throughput, runs = None, runs_so_far(seeds, learners, s, runs_dir)
+        if not runs:
+            raise ValueError(f"--so-far: no run of {learners}, seeds {seeds} in {runs_dir / s.task}")
+    else:
+        update_throughput = bench_updates(s)
+        runs = [] if skip_training else training_runs(seeds, learners, s, runs_dir)
     record = {
         "command": command,
         "machine": {"cpus": os.cpu_count(), "cpu": cpu_model()},
@@ -860,7 +925,7 @@ def run_benchmark(
         "bench_wall_s": time.perf_counter() - t_start,
         "torch_threads": s.threads,
         "versions": {
-            "stable_baselines3": stable_baselines3.__version__,
+            "stable_baselines3": sb3_version,
             "torch": torch.__version__,
             "numpy": np.__version__,
             "python": platform.python_version(),
@@ -879,7 +944,7 @@ def run_benchmark(
         "sb3_env": VS_TASKS[s.task].sb3_env_id or "lerobot_indicator GoalEnvAdapter(" + s.task + ")",
         "protocol_differences": VS_TASKS[s.task].differences + COMMON_DIFFERENCES,
         "update_throughput": update_throughput,
-        "summary": {m: aggregate([r for r in runs if r["method"] == m]) for m in learners} if runs else {},
+        "summary": {m: aggregate(rs) for m in learners if (rs := [r for r in runs if r["method"] == m])},
         "runs": runs,
     }
     if runs:
@@ -888,11 +953,10 @@ def run_benchmark(
         record["ratio_env_steps_to_90_indicator_over_sb3"] = ind / sb3 if sb3 and ind else None
         record["ratios"] = ratios(runs, learners)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / ("vs_sb3.json" if runs else "vs_sb3_updates.json")).write_text(
-        json.dumps(record, indent=2) + "\n"
-    )
+    name = "vs_sb3_so_far" if so_far else "vs_sb3" if runs else "vs_sb3_updates"
+    (out_dir / f"{name}.json").write_text(json.dumps(record, indent=2) + "\n")
     if runs:
-        plot(record, out_dir / "vs_sb3.png")
+        plot(record, out_dir / f"{name}.png")
     return record
 
 

@@ -293,7 +293,7 @@ def save_sb3_state(model, state_dir: Path, progress: dict) -> None:
     shutil.rmtree(old, ignore_errors=True)
 
 
-def load_sb3_state(seed: int, s: Settings, learner: str, state_dir: Path):
+def load_sb3_state(s: Settings, learner: str, state_dir: Path):
     """``(model, progress)`` from the newest complete state in ``state_dir``, or ``(None, None)``."""
     ckpt = next(
         (d for d in (state_dir / "ckpt", state_dir / "ckpt.old") if (d / "progress.json").exists()), None
@@ -317,7 +317,7 @@ def run_sb3(seed: int, s: Settings, learner: str, state_dir: Path | None = None)
     cycles; the random streams are not restored)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    model, progress = load_sb3_state(seed, s, learner, state_dir) if state_dir else (None, None)
+    model, progress = load_sb3_state(s, learner, state_dir) if state_dir else (None, None)
     model = model or make_sb3(seed, s, learner=learner)
     progress = progress or {"curve": [], "eval_s": 0.0, "collect_s": 0.0, "elapsed_s": 0.0}
     eval_env = make_sb3_env(s)
@@ -450,13 +450,10 @@ class EvalCurve:
 
     def _save(self) -> None:
         if self.state:
-            saved = {
-                "curve": self.curve,
-                "elapsed_s": time.perf_counter() - self.start,
-                "eval_s": self.eval_s,
-            }
+            saved = {"curve": self.curve, "elapsed_s": time.perf_counter() - self.start}
+            saved |= {"eval_s": self.eval_s, "collect_s": self.collect_s, "optimise_s": self.optimise_s}
             tmp = self.state.with_suffix(".tmp")
-            tmp.write_text(json.dumps(saved | {"collect_s": self.collect_s, "optimise_s": self.optimise_s}))
+            tmp.write_text(json.dumps(saved))
             tmp.replace(self.state)
 
     def _collect_end(self, phase: PhaseEnd, rollouts: object) -> None:

@@ -343,3 +343,35 @@ def test_sb3_run_resumes_from_its_state(tmp_path):
         "progress.json",
         "replay_buffer.pkl",
     ]
+
+
+def test_zero_action_reference_never_acts_and_scores_the_start(monkeypatch):
+    import gymnasium as gym
+
+    from benchmarks.experiments import vs_sb3
+    from lerobot_indicator.keys import EVAL_SEED_OFFSET
+
+    class Line(gym.Env):
+        """A point on a line: the action moves it; episode i's goal lies 0.1 * i from the start."""
+
+        action_space = gym.spaces.Box(-1, 1, (1,))
+        actions: list[float] = []
+
+        def reset(self, seed=None, options=None):
+            self.t, self.pos, self.goal = 0, 0.0, 0.1 * (seed - EVAL_SEED_OFFSET)
+            return self.obs(), {}
+
+        def obs(self):
+            return {"achieved_goal": np.array([self.pos]), "desired_goal": np.array([self.goal])}
+
+        def step(self, action):
+            self.t += 1
+            self.actions.append(float(action[0]))
+            self.pos += float(action[0])
+            success = abs(self.pos - self.goal) < 0.05
+            return self.obs(), 0.0, False, self.t == 25, {"is_success": success}
+
+    monkeypatch.setattr(vs_sb3, "make_sb3_env", lambda s: Line())
+    ref = vs_sb3.zero_action_reference(vs_sb3.Settings(eval_episodes=3))
+    assert ref == {"eval_success_rate": pytest.approx(1 / 3), "eval_final_distance": pytest.approx(0.1)}
+    assert Line.actions == [0.0] * 75

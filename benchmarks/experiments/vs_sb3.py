@@ -248,14 +248,23 @@ def evaluate_sb3(model, env, n_episodes: int, horizon: int) -> dict[str, float]:
     """Our trainer's evaluation protocol: seeds EVAL_SEED_OFFSET + i, deterministic actor, success at step T.
     The final distance is the env's ``gt_distance``, or (a gymnasium-robotics env) that of its achieved and
     desired goals."""
-    success, distance = [], []
     normalizer = model.get_vec_normalize_env()  # frozen here: normalize_obs does not update its statistics
+
+    def act(obs: dict) -> np.ndarray:
+        return model.predict(
+            obs if normalizer is None else normalizer.normalize_obs(obs), deterministic=True
+        )[0]
+
+    return evaluate_actions(act, env, n_episodes, horizon)
+
+
+def evaluate_actions(act, env, n_episodes: int, horizon: int) -> dict[str, float]:
+    """``evaluate_sb3``'s protocol for any ``act(obs) -> action``."""
+    success, distance = [], []
     for i in range(n_episodes):
         obs, info = env.reset(seed=EVAL_SEED_OFFSET + i)
         for _ in range(horizon):
-            inputs = obs if normalizer is None else normalizer.normalize_obs(obs)
-            action, _ = model.predict(inputs, deterministic=True)
-            obs, _, terminated, truncated, info = env.step(action)
+            obs, _, terminated, truncated, info = env.step(act(obs))
         if not truncated:
             raise RuntimeError("an eval episode did not end at the horizon")
         success.append(bool(info["is_success"]))
@@ -264,6 +273,16 @@ def evaluate_sb3(model, env, n_episodes: int, horizon: int) -> dict[str, float]:
         else:
             distance.append(float(np.linalg.norm(obs["achieved_goal"] - obs["desired_goal"])))
     return {"eval_success_rate": float(np.mean(success)), "eval_final_distance": float(np.mean(distance))}
+
+
+def zero_action_reference(s: Settings) -> dict[str, float]:
+    """SB3's env under ``evaluate_sb3``'s protocol with the zero action at every step: what a learner scores
+    that never acts (on FetchPush, the block stays where it starts)."""
+    env = make_sb3_env(s)
+    try:
+        return evaluate_actions(lambda obs: np.zeros(env.action_space.shape), env, s.eval_episodes, s.horizon)
+    finally:
+        env.close()
 
 
 SB3_CLASSES = {
@@ -941,6 +960,7 @@ def run_benchmark(
         "sb3_env": VS_TASKS[s.task].sb3_env_id or "lerobot_indicator GoalEnvAdapter(" + s.task + ")",
         "protocol_differences": VS_TASKS[s.task].differences + COMMON_DIFFERENCES,
         "update_throughput": update_throughput,
+        "sb3_env_zero_action": zero_action_reference(s),
         "summary": {m: aggregate(rs) for m in learners if (rs := [r for r in runs if r["method"] == m])},
         "runs": runs,
     }

@@ -23,8 +23,10 @@ $(STAMP): pyproject.toml Makefile
 	$(PY) -m pip install -q --disable-pip-version-check --no-deps $(ROBOSUITE)
 	@touch $(STAMP)
 
+# One pytest-xdist worker per core, at most 4 (each holds torch, LeRobot and a subprocess); PYTEST_ARGS="-n 0"
+# runs in one process, e.g. to debug one test.
 test: install
-	$(PY) -m pytest $(PYTEST_ARGS)
+	$(PY) -m pytest -n auto --maxprocesses=4 $(PYTEST_ARGS)
 
 lint: install
 	$(VENV)/bin/ruff check .

@@ -106,29 +106,35 @@ def _assert_input_stats_cover_every_cycle(out: Path, pretrained: Path) -> None:
         np.testing.assert_allclose(weights[f"{net}.encoder.std_0"], std, rtol=1e-4, atol=1e-6)
 
 
-def test_resume_continues_bit_for_bit(tmp_path):
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> list[dict]:
+    """The metrics of a 20-step run on the state Sawyer reach, the reference of the resume tests."""
+    full = tmp_path_factory.mktemp("uninterrupted") / "run"
+    _train(full, *ENVS["sawyer_reach"], "--steps=20")
+    return _metrics(full)
+
+
+def test_resume_continues_bit_for_bit(tmp_path, uninterrupted):
     env_args = ENVS["sawyer_reach"]
-    full, split = tmp_path / "full", tmp_path / "split"
-    _train(full, *env_args, "--steps=20")
+    split = tmp_path / "split"
     _train(split, *env_args, "--steps=10")  # "killed" after two cycles
     _train(split, *env_args, "--steps=20", "--resume=true")
-    a, b = _metrics(full), _metrics(split)
+    a, b = uninterrupted, _metrics(split)
     assert [r["step"] for r in b] == [5, 10, 15, 20], "resume must continue the step counter"
     for ra, rb in zip(a, b, strict=True):
         for key in ("critic_loss", "actor_loss", "q_mean", "train_final_distance"):
             assert ra[key] == rb[key], (ra["cycle"], key, ra[key], rb[key])
 
 
-def test_resume_before_the_first_checkpoint_continues_bit_for_bit(tmp_path):
+def test_resume_before_the_first_checkpoint_continues_bit_for_bit(tmp_path, uninterrupted):
     """A run stopped before its first LeRobot checkpoint has only its per-cycle resume state; --resume
     continues from it (the same command plus --resume=true)."""
     env_args = ENVS["sawyer_reach"]
-    full, split = tmp_path / "full", tmp_path / "split"
-    _train(full, *env_args, "--steps=20")
+    split = tmp_path / "split"
     _train(split, *env_args, "--steps=10", "--save_checkpoint=false")
     assert not (split / "checkpoints").exists() and (split / "resume").is_dir()
     _train(split, *env_args, "--steps=20", "--resume=true")
-    for ra, rb in zip(_metrics(full), _metrics(split), strict=True):
+    for ra, rb in zip(uninterrupted, _metrics(split), strict=True):
         assert ra["critic_loss"] == rb["critic_loss"] and ra["q_mean"] == rb["q_mean"], ra["cycle"]
 
 
@@ -211,6 +217,23 @@ online.main()
 """
 
 
+def _record_args(root: Path, name: str) -> list[str]:
+    return [
+        *ENVS["sawyer_reach"],
+        f"--record.repo_id=local/{name}",
+        f"--record.root={root / f'{name}_dataset'}",
+    ]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted_recording(tmp_path_factory) -> Path:
+    """The dataset a 15-step --record run on the state Sawyer reach records (repo ``local/full``), the
+    reference of the interrupted recordings."""
+    root = tmp_path_factory.mktemp("uninterrupted_recording")
+    _train(root / "full", *_record_args(root, "full"), "--steps=15")
+    return root / "full_dataset"
+
+
 @pytest.mark.parametrize(
     ("kill_at", "kill_with", "exit_code"),
     [
@@ -222,21 +245,14 @@ online.main()
         ("lerobot_indicator.training.online:OnlineTrainer.optimise:3", "SIGTERM", 143),
     ],
 )
-def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, kill_at, kill_with, exit_code):
+def test_resumed_recording_has_each_episode_once(
+    tmp_path, monkeypatch, kill_at, kill_with, exit_code, uninterrupted_recording
+):
     """A run stopped by Ctrl-C or SIGTERM with --record and resumed ends with the same dataset as an
     uninterrupted run; it stops with the shell's exit code for that signal and one line saying how to go on."""
     from lerobot.datasets import LeRobotDataset
 
-    def record_args(name: str) -> list[str]:
-        root = tmp_path / f"{name}_dataset"
-        return [
-            *ENVS["sawyer_reach"],
-            f"--record.repo_id=local/{name}",
-            f"--record.root={root}",
-        ]
-
-    _train(tmp_path / "full", *record_args("full"), "--steps=15")
-    split = [f"--output_dir={tmp_path / 'split'}", *TINY, *record_args("split"), "--steps=15"]
+    split = [f"--output_dir={tmp_path / 'split'}", *TINY, *_record_args(tmp_path, "split"), "--steps=15"]
     proc = subprocess.run(
         [sys.executable, "-c", KILLED_AT_CALL, *split],
         capture_output=True,
@@ -247,12 +263,10 @@ def test_resumed_recording_has_each_episode_once(tmp_path, monkeypatch, kill_at,
     last_lines = proc.stderr.strip().splitlines()[-1]
     assert "interrupted: the run continues from its resume/ state" in last_lines, proc.stderr[-2000:]
     assert "Traceback" not in proc.stderr
-    _train(tmp_path / "split", *record_args("split"), "--steps=15", "--resume=true")
+    _train(tmp_path / "split", *_record_args(tmp_path, "split"), "--steps=15", "--resume=true")
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
-    full, split_ds = (
-        LeRobotDataset(f"local/{n}", root=tmp_path / f"{n}_dataset", video_backend="pyav")
-        for n in ("full", "split")
-    )
+    full = LeRobotDataset("local/full", root=uninterrupted_recording, video_backend="pyav")
+    split_ds = LeRobotDataset("local/split", root=tmp_path / "split_dataset", video_backend="pyav")
     assert full.num_episodes == split_ds.num_episodes == 3
     assert len(full) == len(split_ds)
     for i in range(len(full)):

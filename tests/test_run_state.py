@@ -2,10 +2,12 @@
 buffer, and the resume state survives a crash between its two renames."""
 
 import json
+import shutil
 
 import numpy as np
 import torch
 
+from lerobot_indicator.training import atomic_dir
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import Rollouts
 from lerobot_indicator.training.run_state import (
@@ -110,6 +112,32 @@ def test_a_crash_between_the_renames_resumes_from_the_previous_state(tmp_path):
     _, progress = run_dir.load_state(restored, optimizer)
     assert (progress.cycle, progress.step) == (3, 30)
     torch.testing.assert_close(restored.state_dict(), policy.state_dict(), rtol=0, atol=0)
+
+
+def test_a_kill_after_the_second_rename_leaves_a_state_the_next_save_replaces(tmp_path):
+    """resume/ and a stale resume.old/ both on disk (killed before resume.old was deleted): the run resumes from
+    resume/, and its next save still swaps in."""
+    run_dir = RunDir(tmp_path)
+    policy, optimizer = _policy_and_optimizer(0)
+    run_dir.save_state(policy, optimizer, Progress(cycle=1, step=10))
+    shutil.copytree(tmp_path / RESUME_DIR, tmp_path / f"{RESUME_DIR}.old")
+    run_dir.save_state(policy, optimizer, Progress(cycle=2, step=20))
+    assert run_dir.read_progress().cycle == 2
+    assert not (tmp_path / f"{RESUME_DIR}.old").exists()
+    (tmp_path / f"{RESUME_DIR}.old").mkdir()  # an old copy beside a newer complete one is never read
+    (tmp_path / f"{RESUME_DIR}.old" / "progress.json").write_text(json.dumps(Progress(cycle=1).__dict__))
+    assert run_dir.read_progress().cycle == 2
+
+
+def test_an_interrupted_write_never_replaces_the_state(tmp_path):
+    final = tmp_path / "ckpt"
+    final.mkdir()
+    (final / "a").write_text("complete")
+    tmp = atomic_dir.staging(final)
+    (tmp / "a").write_text("half")  # killed here: the swap never ran
+    assert atomic_dir.newest(final) == final and (final / "a").read_text() == "complete"
+    assert not any(atomic_dir.staging(final).iterdir())  # the next write starts from an empty directory
+    assert atomic_dir.newest(tmp_path / "never_written") is None
 
 
 def test_metrics_of_cycles_after_the_resume_state_are_dropped(tmp_path):

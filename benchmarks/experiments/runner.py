@@ -28,7 +28,9 @@ import numpy as np
 
 from benchmarks.experiments.presets import LABELS, METHODS, PAPER_METHODS, STYLES, TASKS
 from lerobot_indicator.stop_signals import Interrupted, exit_code, raise_interrupted, stopping_signal
+from lerobot_indicator.training import atomic_dir
 from lerobot_indicator.training.plots import read_metrics
+from lerobot_indicator.training.run_state import RESUME_DIR
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -123,7 +125,7 @@ def launch(cfg: ExperimentConfig, task: str, method: str, seed: int) -> float:
         f"--output_dir={out}",
         *cfg.extra_args,
     ]
-    if (out / "resume").exists() or (out / "resume.old").exists():
+    if atomic_dir.newest(out / RESUME_DIR) is not None:
         cmd.append("--resume=true")
     print("$ " + shlex.join(cmd), flush=True)
     t0 = time.perf_counter()

@@ -25,7 +25,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -40,7 +39,9 @@ from torch.utils.flop_counter import FlopCounterMode
 from benchmarks.experiments.presets import METHODS, TASKS
 from benchmarks.records import REPO, cpu_model
 from lerobot_indicator.keys import EVAL_SEED_OFFSET, GT_DISTANCE
+from lerobot_indicator.training import atomic_dir
 from lerobot_indicator.training.hooks import PhaseEnd, TrainerHooks
+from lerobot_indicator.training.run_state import RESUME_DIR
 
 # What differs between the SB3 and our learners beyond the shared hyper-parameters (each library's defaults).
 COMMON_DIFFERENCES = [
@@ -293,31 +294,24 @@ SB3_CLASSES = {
 }
 
 
+SB3_STATE = "ckpt"  # the SB3 resume state's directory inside a run's state_dir
+
+
 def save_sb3_state(model, state_dir: Path, progress: dict) -> None:
     """The run's resume state (weights, optimisers, noise, replay buffer, ``VecNormalize`` statistics, curve and
-    clocks) in ``state_dir/ckpt``, written beside the previous one and swapped in, so an interruption at any
-    moment leaves one complete state."""
-    new, cur, old = state_dir / "ckpt.new", state_dir / "ckpt", state_dir / "ckpt.old"
-    shutil.rmtree(new, ignore_errors=True)
-    new.mkdir(parents=True)
+    clocks) in ``state_dir/ckpt``, written beside the previous one and swapped in (``atomic_dir``)."""
+    new = atomic_dir.staging(state_dir / SB3_STATE)
     model.save(new / "model.zip")
     model.save_replay_buffer(new / "replay_buffer.pkl")
     if (normalizer := model.get_vec_normalize_env()) is not None:
         normalizer.save(str(new / "vec_normalize.pkl"))
     (new / "progress.json").write_text(json.dumps(progress))
-    shutil.rmtree(old, ignore_errors=True)
-    if cur.exists():
-        cur.rename(old)
-    new.rename(cur)
-    shutil.rmtree(old, ignore_errors=True)
+    atomic_dir.swap_in(new, state_dir / SB3_STATE)
 
 
 def load_sb3_state(s: Settings, learner: str, state_dir: Path):
     """``(model, progress)`` from the newest complete state in ``state_dir``, or ``(None, None)``."""
-    ckpt = next(
-        (d for d in (state_dir / "ckpt", state_dir / "ckpt.old") if (d / "progress.json").exists()), None
-    )
-    if ckpt is None:
+    if (ckpt := atomic_dir.newest(state_dir / SB3_STATE)) is None:
         return None, None
     import stable_baselines3
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
@@ -341,7 +335,9 @@ def run_sb3(seed: int, s: Settings, learner: str, state_dir: Path | None = None)
     progress = progress or {"curve": [], "eval_s": 0.0, "collect_s": 0.0, "elapsed_s": 0.0}
     eval_env = make_sb3_env(s)
     curve: list[dict] = progress["curve"]
-    clock = {"eval": progress["eval_s"], "collect": progress["collect_s"], "rollout_t0": 0.0, "start": 0.0}
+    # "start" is when the run would have started had it never stopped: elapsed time continues across resumes.
+    clock = {"eval": progress["eval_s"], "collect": progress["collect_s"], "rollout_t0": 0.0}
+    clock["start"] = time.perf_counter() - progress["elapsed_s"]
 
     def do_eval() -> None:
         t0 = time.perf_counter()
@@ -372,9 +368,6 @@ def run_sb3(seed: int, s: Settings, learner: str, state_dir: Path | None = None)
     class Timer(BaseCallback):
         """Rollout start = the previous cycle's gradient steps are done: evaluate there (as ours does)."""
 
-        def _on_training_start(self) -> None:
-            clock["start"] = time.perf_counter() - progress["elapsed_s"]
-
         def _on_rollout_start(self) -> None:
             n = self.model.num_timesteps
             if n > 0 and n % s.eval_every == 0 and (not curve or curve[-1]["env_steps"] != n):
@@ -391,7 +384,6 @@ def run_sb3(seed: int, s: Settings, learner: str, state_dir: Path | None = None)
     if remaining > 0:
         model.learn(total_timesteps=remaining, callback=Timer(), reset_num_timesteps=not curve)
     if not curve or curve[-1]["env_steps"] != model.num_timesteps:
-        clock["start"] = clock["start"] or time.perf_counter() - progress["elapsed_s"]
         do_eval()  # after the last cycle's gradient steps
     return {"curve": curve, "collect_wall_s": clock["collect"], "updates": int(model._n_updates)}
 
@@ -501,7 +493,7 @@ def run_ours(learner: str, seed: int, s: Settings, state_dir: Path | None = None
         root = state_dir or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
         timing = EvalCurve(root / "timing.json" if state_dir else None)
-        resume = any((root / "run" / d).exists() for d in ("resume", "resume.old"))
+        resume = atomic_dir.newest(root / "run" / RESUME_DIR) is not None
         cfg = ours_config(learner, seed, s, root / "run", s.steps(), resume)
         trainer = OnlineTrainer(cfg, timing.hooks())
         apply_process_settings(trainer.cfg)  # as lerobot-indicator-train does
@@ -766,8 +758,8 @@ def runs_so_far(seeds: list[int], learners: list[str], s: Settings, runs_dir: Pa
             if (state_dir / "run.json").exists():
                 run = json.loads((state_dir / "run.json").read_text()) | {"finished": True}
             else:
-                saved = [state_dir / "timing.json", state_dir / "ckpt" / "progress.json"]
-                saved += [state_dir / "ckpt.old" / "progress.json"]
+                sb3_state = atomic_dir.newest(state_dir / SB3_STATE)
+                saved = [state_dir / "timing.json", *([sb3_state / "progress.json"] if sb3_state else [])]
                 state = next((json.loads(f.read_text()) for f in saved if f.exists()), None)
                 if state is None or not state["curve"]:
                     continue
@@ -910,7 +902,7 @@ def run_benchmark(
     runs_dir: Path | None = None,
     so_far: bool = False,
 ) -> dict:
-    """The update benchmark, then (unless ``skip_training``) every training run; writes ``vs_sb3.json`` and
+    """Every training run (unless ``skip_training``), then the update benchmark; writes ``vs_sb3.json`` and
     ``vs_sb3.png``, or ``vs_sb3_updates.json`` for the update benchmark alone (never replacing a full run). With
     ``so_far``: neither, only the runs of ``runs_dir`` as far as they got, in ``vs_sb3_so_far.json`` / ``.png``."""
     from importlib.metadata import PackageNotFoundError, version
@@ -932,8 +924,10 @@ def run_benchmark(
         if not runs:
             raise ValueError(f"--so-far: no run of {learners}, seeds {seeds} in {runs_dir / s.task}")
     else:
-        update_throughput = bench_updates(s)
+        # Training first: an interrupted invocation then never pays for the update benchmark, only the one that
+        # finishes every run does.
         runs = [] if skip_training else training_runs(seeds, learners, s, runs_dir)
+        update_throughput = bench_updates(s)
     record = {
         "command": command,
         "machine": {"cpus": os.cpu_count(), "cpu": cpu_model()},

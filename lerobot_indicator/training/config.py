@@ -14,6 +14,7 @@ from lerobot.configs.policies import PreTrainedConfig
 from lerobot.utils.hub import HubMixin
 
 from lerobot_indicator.io_errors import ConfigError
+from lerobot_indicator.training import atomic_dir
 from lerobot_indicator.training.offline_check import OfflineCheckConfig
 
 TRAIN_CONFIG_NAME = "train_config.json"
@@ -152,8 +153,9 @@ class OnlineTrainConfig(HubMixin):
         if self.resume:
             # The per-cycle resume state (resume/: weights, optimizer, counters) is all a run continues from, so a
             # missing or corrupt checkpoints/last never blocks a resume; the same command gives the same policy.
-            has_state = any((self.output_dir / d).exists() for d in ("resume", "resume.old"))
-            if not has_state:
+            from lerobot_indicator.training.run_state import RESUME_DIR  # run_state imports this module
+
+            if atomic_dir.newest(self.output_dir / RESUME_DIR) is None:
                 held = sorted(p.name for p in self.output_dir.iterdir()) if self.output_dir.is_dir() else []
                 raise FileNotFoundError(
                     f"--resume=true but {self.output_dir} has no resume state (resume/); it holds {held or 'nothing'}"

@@ -47,7 +47,6 @@ from pathlib import Path
 import numpy as np
 import torch
 from lerobot.configs.default import DatasetConfig
-from scipy.stats import spearmanr
 from torch import Tensor
 
 # Offsets k of the value ordering, and the near goals of the action error (the check's defaults).
@@ -69,6 +68,8 @@ def spearman(x: Tensor, y: Tensor) -> float:
         raise ValueError(f"spearman: {x.numel()} values against {y.numel()}")
     if bool((x == x.flatten()[0]).all()) or bool((y == y.flatten()[0]).all()):
         return math.nan
+    from scipy.stats import spearmanr  # here, not at module level: scipy.stats adds ~1 s to every CLI's start
+
     return float(spearmanr(x.double().flatten().numpy(), y.double().flatten().numpy()).statistic)
 
 
@@ -286,11 +287,9 @@ def trainer_metrics(result: dict, held_out: bool) -> dict[str, float]:
 
 def offline_check_figure(result: dict, path: Path, title: str = "") -> None:
     """Mean Q by goal offset, per-episode correlations, and the action errors against their baselines."""
-    import matplotlib
+    from lerobot_indicator.training.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(15, 3.8))
     axes[0].plot(result["offsets"], result["q_by_offset"], "o-")
     axes[0].set(xlabel="goal offset k (steps ahead)", ylabel="mean Q(o_t, o_{t+k}, a_t)", xscale="log")

@@ -28,6 +28,7 @@ from safetensors.torch import load_model, save_model
 from lerobot_indicator.finite import check_module
 from lerobot_indicator.io_errors import CorruptFileError, reading
 from lerobot_indicator.keys import GT_ACHIEVED_GOAL, GT_DESIRED_GOAL
+from lerobot_indicator.training import atomic_dir
 from lerobot_indicator.training.recording import RolloutRecorder
 from lerobot_indicator.training.replay_buffer import EpisodeReplayBuffer
 from lerobot_indicator.training.rollout import Rollouts
@@ -93,10 +94,7 @@ class RunDir:
         self._evicted: list[str] = []
 
     def state_dir(self) -> Path:
-        state, old = self.out / RESUME_DIR, self.out / f"{RESUME_DIR}.old"
-        if not state.exists() and old.exists():
-            return old  # crashed between the two renames of save_state
-        if not state.exists():
+        if (state := atomic_dir.newest(self.out / RESUME_DIR)) is None:
             raise FileNotFoundError(f"--resume=true but {self.out} has no resume state ({RESUME_DIR}/)")
         return state
 
@@ -104,9 +102,7 @@ class RunDir:
         self, policy: torch.nn.Module, optimizer: torch.optim.Optimizer, progress: Progress
     ) -> None:
         """Atomic: write resume.tmp/, then swap it in; a crash leaves the previous state intact."""
-        tmp, final, old = (self.out / f"{RESUME_DIR}{s}" for s in (".tmp", "", ".old"))
-        shutil.rmtree(tmp, ignore_errors=True)
-        tmp.mkdir()
+        tmp = atomic_dir.staging(self.out / RESUME_DIR)
         try:
             check_module(policy, "resume state")
             save_model(policy, str(tmp / "model.safetensors"))  # handles the shared encoder
@@ -115,10 +111,7 @@ class RunDir:
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)  # e.g. the disk filled up: free what was written
             raise
-        if final.exists():
-            final.rename(old)
-        tmp.rename(final)
-        shutil.rmtree(old, ignore_errors=True)
+        atomic_dir.swap_in(tmp, self.out / RESUME_DIR)
         for name in self._evicted:
             (self.out / REPLAY_DIR / name).unlink(missing_ok=True)
         self._evicted.clear()

@@ -55,6 +55,8 @@ COMMON_DIFFERENCES = [
     "clipped to +-5 (baselines' HER); SB3 none",
     "optimiser: SB3 one Adam per network (critic step then actor step); ours one Adam over both, one backward",
     "ours writes its resume state (weights, optimizer, new episodes) after every cycle; that time counts",
+    "with --runs-dir SB3 writes its resume state (model, optimisers, the whole replay buffer) after every "
+    "evaluation; that time counts too",
 ]
 # Our learners: the package's method presets.
 OURS = {"ours_oracle": "oracle", "ours_indicator": "indicator_balance_filter"}

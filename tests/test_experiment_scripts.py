@@ -18,6 +18,7 @@ import pytest
 
 import lerobot_indicator  # noqa: F401  (registers the gym ids)
 from benchmarks.experiments import runner as experiments
+from benchmarks.experiments.start_distance import geometric_median
 from benchmarks.probes.policy_probe import clipped_goal_dims
 from lerobot_indicator.keys import EVAL_SEED_OFFSET
 
@@ -38,19 +39,34 @@ def test_start_distance_is_the_eval_goals_distance_at_reset(tmp_path):
     record = json.loads(out.read_text())
     env = gym.make("lerobot_indicator/SawyerReach-v0", obs_type="state")
     try:
-        expected = [env.reset(seed=EVAL_SEED_OFFSET + i)[1]["gt_distance"] for i in range(2)]
+        infos = [env.reset(seed=EVAL_SEED_OFFSET + i)[1] for i in range(2)]
     finally:
         env.close()
-    np.testing.assert_allclose(record["start_distances"], expected, rtol=1e-6)
+    np.testing.assert_allclose(record["start_distances"], [i["gt_distance"] for i in infos], rtol=1e-6)
     assert record["start_distance_mean"] == np.mean(record["start_distances"])
+    # Two goals: every point between them is a geometric median, each at half their distance on average.
+    half_gap = np.linalg.norm(infos[0]["gt_desired_goal"] - infos[1]["gt_desired_goal"]) / 2
+    assert record["goal_blind_distance_mean"] == pytest.approx(half_gap, rel=1e-4)
     assert record["command"].startswith("python ")
 
     reference = experiments.start_distances(tmp_path, ["reach_state", "rope_state"])
     assert reference == {"reach_state": record["start_distance_mean"]}
     lines = experiments.reference_lines(tmp_path, ["reach_state"])
     assert lines == {
-        "reach_state": {"eval_final_distance": {"no movement (start distance)": reference["reach_state"]}}
+        "reach_state": {
+            "eval_final_distance": {
+                "no movement (start distance)": reference["reach_state"],
+                experiments.GOAL_BLIND: record["goal_blind_distance_mean"],
+            }
+        }
     }
+
+
+def test_geometric_median_on_hand_made_points():
+    # Collinear: the middle point, however far the outlier (the mean is at 2); a square: its centre.
+    np.testing.assert_allclose(geometric_median(np.array([[0.0, 0], [1, 0], [5, 0]])), [1, 0], atol=1e-4)
+    square = np.array([[1.0, 1], [1, -1], [-1, 1], [-1, -1]])
+    np.testing.assert_allclose(geometric_median(square), [0, 0], atol=1e-9)
 
 
 def test_rope_plots_carry_the_ceiling_random_and_not_moving_lines(tmp_path):

@@ -2,6 +2,7 @@
 docs/conventions.md: keys, goal images rendered in the goal configuration, exact restore, hidden markers,
 LeRobot's make_env path and one tiny lerobot-indicator-train cycle."""
 
+import json
 import os
 import subprocess
 import sys
@@ -219,6 +220,21 @@ def test_seeded_resets_repeat_and_differ():
     assert not np.array_equal(first["goal_state"], other["goal_state"])
 
 
+def test_images_come_with_the_environment_state_only_when_asked():
+    env = gym.make(
+        TASKS["reacher"][0], obs_type="rgb", camera=dict(SMALL), env_state_with_images=True
+    ).unwrapped
+    try:
+        obs, _ = env.reset(seed=3)
+        obs, *_ = env.step(np.ones(2, dtype=np.float32))
+        assert set(obs["pixels"]) == {"front", "goal_front"}
+        np.testing.assert_array_equal(obs["environment_state"], env.environment_state().astype(np.float32))
+        assert obs["environment_state"][4:].any()  # the velocities a full-torque step leaves
+    finally:
+        env.close()
+    assert "environment_state" not in env_of("reacher", "rgb").reset(seed=3)[0]
+
+
 def test_reacher_environment_state_is_the_wrapped_observation_without_its_goal():
     env = env_of("reacher", "state")
     env.reset(seed=1)
@@ -278,10 +294,18 @@ def eval_batch(cfg, n_envs=2):
             {"observation.images.front_depth": (1, H, W), "observation.images.goal_front_depth": (1, H, W)},
         ),
         ("fetch_push", "state", {"observation.environment_state": (25,)}),
+        (
+            "reacher",
+            "rgb+env_state",
+            {"observation.images.front": (3, H, W), "observation.environment_state": (6,)},
+        ),
     ],
 )
 def test_lerobot_make_env_gives_documented_keys(task, obs_type, keys):
-    cfg = make_env_config(task, obs_type=obs_type, camera=dict(SMALL))
+    obs_type, _, with_env_state = obs_type.partition("+")
+    cfg = make_env_config(
+        task, obs_type=obs_type, camera=dict(SMALL), env_state_with_images=bool(with_env_state)
+    )
     batch, info, frames, max_steps = eval_batch(cfg)
     state_dim = TASKS[task][1]
     keys = {**keys, "observation.state": (state_dim,), "observation.goal_state": (state_dim,)}
@@ -294,7 +318,12 @@ def test_lerobot_make_env_gives_documented_keys(task, obs_type, keys):
     assert max_steps == 50 and frames[0].shape == (H, W, 3) and frames[0].dtype == np.uint8
 
 
-def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path):
+@pytest.mark.parametrize(
+    "context",
+    [[], ["--env.env_state_with_images=true", "--policy.context_keys=[observation.environment_state]"]],
+    ids=["images", "images+environment_state"],
+)
+def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path, context):
     cmd = [
         str(Path(sys.executable).parent / "lerobot-indicator-train"),
         "--env.type=reacher",
@@ -316,11 +345,15 @@ def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path):
         "--save_freq=2",
         "--seed=1",
         f"--output_dir={tmp_path / 'run'}",
+        *context,
     ]
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-4000:]
-    assert (tmp_path / "run" / "checkpoints" / "last" / "pretrained_model" / "model.safetensors").exists()
+    saved = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
+    assert (saved / "model.safetensors").exists()
+    config = json.loads((saved / "config.json").read_text())
+    assert config["context_keys"] == (["observation.environment_state"] if context else [])
 
 
 @pytest.mark.parametrize(

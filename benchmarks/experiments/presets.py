@@ -4,7 +4,7 @@ Used by ``benchmarks/experiments/run.py`` (the comparison), ``benchmarks/experim
 defined once. A method is a list of ``--policy.*`` flags; a task preset the env flags and the budget.
 """
 
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 
 # Paper section 6: Oracle uses the ground-truth reward; methods without balancing relabel with a uniform
 # future step with probability 0.9 and keep the original goal otherwise (HER-style). Balancing names its t = T-1
@@ -324,6 +324,27 @@ TASKS["fetch_push_state_8workers"] = TaskPreset(
 TASKS["fetch_reach_rgbd"] = TaskPreset(
     ["--env.type=fetch_reach", "--env.obs_type=rgbd", *FETCH_T_EPS, RGBD_KEYS], 20000, 100, 2, 1000, 20
 )
+# Reacher from state (fingertip xy compared; joint cos, sin and velocities as context): what the visual preset's
+# arms reach when the image is not the bottleneck, at the state tasks' 0.4 updates per env step.
+TASKS["reacher_state"] = TaskPreset(
+    [
+        "--env.type=reacher",
+        "--env.obs_type=state",
+        "--env.episode_length=50",
+        "--env.epsilon=0.01",
+        *GYM_STATE_KEYS,
+    ],
+    8000,
+    40,
+    2,
+    400,
+    20,
+)
+# The same without the context input: the fingertip xy alone, so the policy cannot see the velocities.
+TASKS["reacher_state_tip_only"] = TaskPreset(
+    [*TASKS["reacher_state"].env_args[:4], GYM_STATE_KEYS[0], "--policy.context_keys=[]"],
+    *astuple(TASKS["reacher_state"])[1:],
+)
 TASKS["reacher_rgb"] = TaskPreset(
     [
         "--env.type=reacher",
@@ -337,4 +358,14 @@ TASKS["reacher_rgb"] = TaskPreset(
     2,
     1000,
     20,
+)
+# The same images with the joint cos, sin and velocities as context (never compared): a torque-driven arm's
+# velocities are in no single image, and reacher_state_tip_only shows the task does not learn without them.
+TASKS["reacher_rgb_env_state"] = TaskPreset(
+    [
+        *TASKS["reacher_rgb"].env_args,
+        "--env.env_state_with_images=true",
+        "--policy.context_keys=[observation.environment_state]",
+    ],
+    *astuple(TASKS["reacher_rgb"])[1:],
 )

@@ -283,6 +283,15 @@ def start_distances(out: Path, tasks: list[str]) -> dict[str, float]:
     return {t: json.loads(f.read_text())["start_distance_mean"] for t, f in files.items() if f.exists()}
 
 
+def goal_blind_distances(out: Path, tasks: list[str]) -> dict[str, float]:
+    """Per task, the best final distance of a policy that ignores the goal (``goal_blind_distance_mean`` of the
+    same start-distance records), where measured."""
+    files = {task: out / f"start_distance_{task}.json" for task in tasks}
+    records = {t: json.loads(f.read_text()) for t, f in files.items() if f.exists()}
+    return {t: r["goal_blind_distance_mean"] for t, r in records.items() if "goal_blind_distance_mean" in r}
+
+
+GOAL_BLIND = "goal-blind: one fixed point for all goals"
 ROPE_CEILING = Path(__file__).resolve().parents[2] / "docs/results/rope_ceiling/ceiling.json"
 ROPE_GOAL_SET = (
     "cache:4000"  # the start/goal pairs the rope tasks evaluate on unless a run names another cache
@@ -316,6 +325,8 @@ def reference_lines(
         lines.setdefault(task, {}).setdefault("eval_final_distance", {})["no movement (start distance)"] = (
             distance
         )
+    for task, distance in goal_blind_distances(out, tasks).items():
+        lines.setdefault(task, {}).setdefault("eval_final_distance", {})[GOAL_BLIND] = distance
     for task in tasks:
         if not task.startswith("rope") or task not in TASKS or not ROPE_CEILING.exists():
             continue
@@ -336,6 +347,7 @@ REFERENCE_STYLES = {
     "no movement (start distance)": ("grey", ":"),
     "ceiling: CEM with the true simulator": ("black", "--"),
     "uniformly random actions": ("grey", "-."),
+    GOAL_BLIND: ("tab:brown", ":"),
 }
 
 

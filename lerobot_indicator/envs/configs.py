@@ -235,8 +235,9 @@ def wrapped_task_camera(preset: str, **overrides) -> GoalCameraConfig:
 class GymGoalEnvConfig(GoalEnvConfig):
     """Shared base of the wrapped gymnasium goal tasks (``lerobot_indicator/envs/gym_goal.py``): the paper's
     T = 50; success when the ground-truth distance is within ``epsilon`` (m). ``fps`` is the wrapped env's
-    control rate (fixed by it). With ``obs_type`` "state" the env also gives ``observation.environment_state``:
-    the wrapped env's observation without its goal (``env_state_dim`` numbers), never compared."""
+    control rate (fixed by it). With ``obs_type`` "state", or with images and ``env_state_with_images``, the env
+    also gives ``observation.environment_state``: the wrapped env's observation without its goal
+    (``env_state_dim`` numbers), never compared."""
 
     # What a task fixes: (state_dim, action_dim, env_state_dim) and its camera preset (wrapped_task_camera).
     dims: ClassVar[tuple[int, int, int]] = (3, 3, 10)
@@ -244,6 +245,8 @@ class GymGoalEnvConfig(GoalEnvConfig):
     episode_length: int = 50
     epsilon: float = 0.05
     env_state_dim: int = 10
+    # Also give observation.environment_state with rgb / rgbd observations (a context input; never compared).
+    env_state_with_images: bool = False
 
     def __post_init__(self):
         if isinstance(self.camera, dict):  # make_env_config("reacher", camera={...}) keeps the task's pose
@@ -256,7 +259,7 @@ class GymGoalEnvConfig(GoalEnvConfig):
                 f"{(self.state_dim, self.action_dim, self.env_state_dim)}"
             )
         super().__post_init__()
-        if self.obs_type == "state":
+        if self.obs_type == "state" or self.env_state_with_images:
             self.features["environment_state"] = PolicyFeature(
                 type=FeatureType.ENV, shape=(self.env_state_dim,)
             )
@@ -264,7 +267,11 @@ class GymGoalEnvConfig(GoalEnvConfig):
 
     @property
     def gym_kwargs(self) -> dict:
-        return {**super().gym_kwargs, "epsilon": self.epsilon}
+        return {
+            **super().gym_kwargs,
+            "epsilon": self.epsilon,
+            "env_state_with_images": self.env_state_with_images,
+        }
 
 
 @EnvConfig.register_subclass("reacher")

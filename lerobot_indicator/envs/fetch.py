@@ -93,7 +93,8 @@ class FetchReachEnv(FetchEnv):
     environment_state_names = FETCH_REACH_STATE_NAMES
 
     def __init__(self, obs_type: str = "rgbd", epsilon: float = 0.05, **kwargs):
-        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, render_mode, episode_length, eval_reward)."""
+        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, env_state_with_images, render_mode, episode_length,
+        eval_reward)."""
         super().__init__(obs_type=obs_type, epsilon=epsilon, **kwargs)
         self._bind()
         self._measure_goal()
@@ -128,7 +129,8 @@ class FetchPushEnv(FetchEnv):
     action_names = ("delta_x", "delta_y", "delta_z", "gripper")
 
     def __init__(self, obs_type: str = "state", epsilon: float = 0.05, **kwargs):
-        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, render_mode, episode_length, eval_reward)."""
+        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, env_state_with_images, render_mode, episode_length,
+        eval_reward)."""
         super().__init__(obs_type=obs_type, epsilon=epsilon, **kwargs)
         self._bind()
         joint = self.model.joint(OBJECT_JOINT)

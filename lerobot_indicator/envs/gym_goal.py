@@ -10,8 +10,8 @@ geoms) are never drawn, in observations and goals alike: they would show the goa
 
 A task names the wrapped env and its markers and fills four hooks: ``_agent_state`` (the compared state),
 ``_achieved_goal`` (ground truth), ``_enter_goal_configuration`` and ``environment_state`` (the wrapped
-env's observation without its goal part, ``obs_type="state"`` only: no goal key, so never compared; the
-policy's default context input, docs/conventions.md).
+env's observation without its goal part, given with ``obs_type="state"`` or ``env_state_with_images``: no
+goal key, so never compared; the policy's default context input with state, docs/conventions.md).
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class GymGoalEnv(MujocoGoalEnv):
     """A wrapped gymnasium MuJoCo env as a goal task (module docstring).
 
     Class attributes a task sets: ``wrapped_id`` (gymnasium id), ``state_dim`` (``agent_pos``),
-    ``action_dim``, ``env_state_dim`` (``environment_state``, state observations only), ``marker_geoms`` /
+    ``action_dim``, ``env_state_dim`` (``environment_state``), ``marker_geoms`` /
     ``marker_bodies`` (geoms, or all geoms of bodies, hidden from the camera) and ``default_camera``
     (``GoalCameraConfig`` fields). The camera is a free camera placed by ``camera.pos`` / ``camera.lookat``
     with ``camera.fovy_deg``. ``fps`` is the wrapped env's control rate, ``1 / dt``.
@@ -74,9 +74,11 @@ class GymGoalEnv(MujocoGoalEnv):
         camera: GoalCameraConfig | dict | None = None,
         fps: int | None = None,
         epsilon: float = 0.05,
+        env_state_with_images: bool = False,
         **kwargs,
     ):
-        """``kwargs``: :class:`MujocoGoalEnv`'s (render_mode, episode_length, eval_reward)."""
+        """``env_state_with_images``: give ``environment_state`` with rgb / rgbd observations too.
+        ``kwargs``: :class:`MujocoGoalEnv`'s (render_mode, episode_length, eval_reward)."""
         from lerobot_indicator.envs.rendering import FreeCamera
 
         self.inner = make_wrapped_env(self.wrapped_id)
@@ -94,7 +96,8 @@ class GymGoalEnv(MujocoGoalEnv):
         for name in self.marker_bodies:
             self.model.geom_group[self.model.geom_bodyid == self.model.body(name).id] = MARKER_GROUP
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(self.action_dim,), dtype=np.float32)
-        if obs_type == "state":
+        self.gives_env_state = obs_type == "state" or env_state_with_images
+        if self.gives_env_state:
             env_state = gym.spaces.Box(-np.inf, np.inf, shape=(self.env_state_dim,), dtype=np.float32)
             self.observation_space = gym.spaces.Dict(
                 {**self.observation_space.spaces, "environment_state": env_state}
@@ -143,7 +146,7 @@ class GymGoalEnv(MujocoGoalEnv):
 
     def _get_obs(self) -> dict[str, Any]:
         obs = super()._get_obs()
-        if self.obs_type == "state":
+        if self.gives_env_state:
             obs["environment_state"] = self.environment_state().astype(np.float32)
         return obs
 

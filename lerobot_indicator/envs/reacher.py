@@ -8,7 +8,8 @@ reaches the same point and renders differently), so the goal image shows the arm
 red target sphere is never drawn.
 
 Observations (besides the shared camera keys): ``agent_pos`` = the fingertip xy (m), ``goal_state`` = the
-fingertip xy in the goal configuration (the paper's 2-d goal); with ``obs_type="state"`` also
+fingertip xy in the goal configuration (the paper's 2-d goal); with ``obs_type="state"`` or
+``env_state_with_images`` also
 ``environment_state`` = cos and sin of the two joint angles and their velocities (6): never compared, the
 policy's default context input (a torque-driven arm's velocities). ``info``:
 ``gt_achieved_goal`` / ``gt_desired_goal`` = fingertip xy now / in the goal configuration, ``gt_distance``
@@ -58,7 +59,8 @@ class ReacherEnv(GymGoalEnv):
     default_camera = REACHER_CAMERA
 
     def __init__(self, obs_type: str = "rgb", epsilon: float = 0.01, **kwargs):
-        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, render_mode, episode_length, eval_reward)."""
+        """``kwargs``: :class:`GymGoalEnv`'s (camera, fps, env_state_with_images, render_mode, episode_length,
+        eval_reward)."""
         super().__init__(obs_type=obs_type, epsilon=epsilon, **kwargs)
         m = self.model
         self._tip = m.body("fingertip").id

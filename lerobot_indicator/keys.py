@@ -8,6 +8,8 @@ OBS_PREFIX = "observation."
 GOAL_PREFIX = "goal_"
 # Depth images: camera ``<cam>`` -> ``<cam>_depth`` (env key, dataset feature and batch key).
 DEPTH_SUFFIX = "_depth"
+# The previous step's images of camera ``<cam>`` (``previous_frame`` envs): camera ``<cam>_prev``.
+PREVIOUS_SUFFIX = "_prev"
 
 # Ground truth, as the envs' ``info`` dict names it (evaluation and the oracle baseline only) ...
 GT_ACHIEVED_GOAL = "gt_achieved_goal"
@@ -31,6 +33,11 @@ EVAL_SEED_OFFSET = 10**9
 def depth_key(camera: str) -> str:
     """``front -> front_depth``; works on env keys and batch keys alike."""
     return f"{camera}{DEPTH_SUFFIX}"
+
+
+def previous_key(camera: str) -> str:
+    """``front -> front_prev``: the camera name under which an env gives the previous step's images."""
+    return f"{camera}{PREVIOUS_SUFFIX}"
 
 
 def ground_truth_key(info_key: str) -> str:

@@ -235,6 +235,44 @@ def test_images_come_with_the_environment_state_only_when_asked():
     assert "environment_state" not in env_of("reacher", "rgb").reset(seed=3)[0]
 
 
+@pytest.mark.parametrize("task,obs_type", [("reacher", "rgb"), ("fetch_reach", "rgbd")])
+def test_previous_frame_shows_the_last_observation_and_the_goal_again(task, obs_type):
+    env = gym.make(TASKS[task][0], obs_type=obs_type, camera=dict(SMALL), previous_frame=True).unwrapped
+    image_keys = [("pixels", "front"), (None, "front_depth")] if obs_type == "rgbd" else [("pixels", "front")]
+
+    def image(obs, nest, name):
+        return obs[nest][name] if nest else obs[name]
+
+    def prev(name):
+        return name.replace("front", "front_prev")
+
+    try:
+        obs, _ = env.reset(seed=5)
+        assert set(obs["pixels"]) == {"front", "goal_front", "front_prev", "goal_front_prev"}
+        assert set(env.observation_space.spaces["pixels"].spaces) == set(obs["pixels"])
+        for nest, name in image_keys:  # at reset the start's own images; the goal at rest
+            np.testing.assert_array_equal(image(obs, nest, prev(name)), image(obs, nest, name))
+            np.testing.assert_array_equal(
+                image(obs, nest, "goal_" + prev(name)), image(obs, nest, "goal_" + name)
+            )
+        for action in rng_actions(env, 3, seed=5):
+            last = obs
+            obs, *_ = env.step(action)
+            for nest, name in image_keys:
+                np.testing.assert_array_equal(image(obs, nest, prev(name)), image(last, nest, name))
+                np.testing.assert_array_equal(
+                    image(obs, nest, "goal_" + prev(name)), image(obs, nest, "goal_" + name)
+                )
+            assert not np.array_equal(obs["pixels"]["front"], obs["pixels"]["front_prev"])  # the arm moved
+        again, _ = env.reset(seed=5)  # a reset forgets the last episode's frames
+        np.testing.assert_array_equal(again["pixels"]["front_prev"], again["pixels"]["front"])
+    finally:
+        env.close()
+    assert "front_prev" not in env_of(task, obs_type).reset(seed=5)[0]["pixels"]
+    with pytest.raises(ValueError, match="previous_frame"):
+        make_env_config(task, obs_type="state", previous_frame=True)
+
+
 def test_reacher_environment_state_is_the_wrapped_observation_without_its_goal():
     env = env_of("reacher", "state")
     env.reset(seed=1)
@@ -296,16 +334,22 @@ def eval_batch(cfg, n_envs=2):
         ("fetch_push", "state", {"observation.environment_state": (25,)}),
         (
             "reacher",
-            "rgb+env_state",
+            "rgb+env_state_with_images",
             {"observation.images.front": (3, H, W), "observation.environment_state": (6,)},
+        ),
+        (
+            "fetch_reach",
+            "rgbd+previous_frame",
+            {
+                "observation.images.front_prev": (3, H, W),
+                "observation.images.goal_front_prev_depth": (1, H, W),
+            },
         ),
     ],
 )
 def test_lerobot_make_env_gives_documented_keys(task, obs_type, keys):
-    obs_type, _, with_env_state = obs_type.partition("+")
-    cfg = make_env_config(
-        task, obs_type=obs_type, camera=dict(SMALL), env_state_with_images=bool(with_env_state)
-    )
+    obs_type, _, flag = obs_type.partition("+")
+    cfg = make_env_config(task, obs_type=obs_type, camera=dict(SMALL), **({flag: True} if flag else {}))
     batch, info, frames, max_steps = eval_batch(cfg)
     state_dim = TASKS[task][1]
     keys = {**keys, "observation.state": (state_dim,), "observation.goal_state": (state_dim,)}
@@ -320,8 +364,12 @@ def test_lerobot_make_env_gives_documented_keys(task, obs_type, keys):
 
 @pytest.mark.parametrize(
     "context",
-    [[], ["--env.env_state_with_images=true", "--policy.context_keys=[observation.environment_state]"]],
-    ids=["images", "images+environment_state"],
+    [
+        [],
+        ["--env.env_state_with_images=true", "--policy.context_keys=[observation.environment_state]"],
+        ["--env.previous_frame=true"],
+    ],
+    ids=["images", "images+environment_state", "images+previous_frame"],
 )
 def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path, context):
     cmd = [
@@ -353,13 +401,18 @@ def test_online_training_runs_one_tiny_cycle_on_visual_reacher(tmp_path, context
     saved = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
     assert (saved / "model.safetensors").exists()
     config = json.loads((saved / "config.json").read_text())
-    assert config["context_keys"] == (["observation.environment_state"] if context else [])
+    assert config["context_keys"] == (
+        ["observation.environment_state"] if "--policy.context_keys" in str(context) else []
+    )
+    previous = ["observation.images.front_prev"] if "--env.previous_frame=true" in context else []
+    assert sorted(config["observation_keys"]) == ["observation.images.front", *previous]
 
 
 @pytest.mark.parametrize(
     "task,obs_type,compared,context",
     [
         ("reacher", "rgb", ["observation.images.front"], []),
+        ("reacher", "rgb+previous_frame", ["observation.images.front", "observation.images.front_prev"], []),
         ("reacher", "state", ["observation.state"], ["observation.environment_state"]),
         ("fetch_reach", "rgbd", ["observation.images.front", "observation.images.front_depth"], []),
         ("fetch_reach", "state", ["observation.state"], ["observation.environment_state"]),
@@ -375,7 +428,10 @@ def test_policy_defaults_compare_the_goal_state_and_condition_on_the_environment
 
     from lerobot_indicator.policy.configuration_indicator_ddpg import IndicatorDDPGConfig
 
-    features = env_to_policy_features(make_env_config(task, obs_type=obs_type))
+    obs_type, _, flag = obs_type.partition("+")
+    features = env_to_policy_features(
+        make_env_config(task, obs_type=obs_type, **({flag: True} if flag else {}))
+    )
     cfg = IndicatorDDPGConfig(device="cpu", horizon=50)
     cfg.output_features = {k: f for k, f in features.items() if f.type is FeatureType.ACTION}
     cfg.input_features = {k: f for k, f in features.items() if f.type is not FeatureType.ACTION}

@@ -369,3 +369,13 @@ TASKS["reacher_rgb_env_state"] = TaskPreset(
     ],
     *astuple(TASKS["reacher_rgb"])[1:],
 )
+# Pixels only, with the previous step's image compared beside the current one (--env.previous_frame): the
+# motion that reacher_rgb's single image lacks, without handing the policy any state.
+TASKS["reacher_rgb_previous_frame"] = TaskPreset(
+    [
+        *TASKS["reacher_rgb"].env_args[:4],
+        "--env.previous_frame=true",
+        "--policy.observation_keys=[observation.images.front,observation.images.front_prev]",
+    ],
+    *astuple(TASKS["reacher_rgb"])[1:],
+)

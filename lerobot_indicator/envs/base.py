@@ -14,6 +14,11 @@ Observation dict (``obs_type``: ``state`` | ``rgb`` | ``rgbd``):
     pixels/goal_<cam>    uint8 HxWx3       rgb, rgbd
     <cam>_depth          uint16 HxWx1 mm   rgbd (top level: LeRobot's preprocess_observation drops nested
     goal_<cam>_depth     uint16 HxWx1 mm    non-``pixels`` dicts; the env processor moves them to images)
+
+With ``previous_frame`` the images of the step before (at reset: the start's own) come too, as camera
+``<cam>_prev`` (``pixels/<cam>_prev``, ``<cam>_prev_depth``), with the goal image again as its goal: a compared
+key like the current one, so the compared observation holds the motion that one image of a torque-driven arm
+lacks, and the goal asks for the goal configuration at rest.
 """
 
 from __future__ import annotations
@@ -26,7 +31,14 @@ import numpy as np
 
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.models import RENDER_GROUP
-from lerobot_indicator.keys import GOAL_PREFIX, GT_ACHIEVED_GOAL, GT_DESIRED_GOAL, GT_DISTANCE, depth_key
+from lerobot_indicator.keys import (
+    GOAL_PREFIX,
+    GT_ACHIEVED_GOAL,
+    GT_DESIRED_GOAL,
+    GT_DISTANCE,
+    depth_key,
+    previous_key,
+)
 
 OBS_TYPES = ("state", "rgb", "rgbd")
 # Evaluation-only env reward (training never uses it: the indicator reward comes from observations).
@@ -85,6 +97,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         episode_length: int | None = None,
         eval_reward: str = "success",
         epsilon: float = 0.05,
+        previous_frame: bool = False,
     ):
         if epsilon <= 0:
             raise ValueError(f"epsilon must be > 0, got {epsilon}")
@@ -105,7 +118,15 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         self.ee_cfg = _as(EndEffectorConfig, end_effector)
         if obs_type == "rgbd" and not self.camera_cfg.use_depth:
             raise ValueError("obs_type 'rgbd' needs camera.use_depth: true")
+        if previous_frame and obs_type == "state":
+            raise ValueError(
+                "previous_frame gives the previous step's camera images: obs_type 'state' has none"
+            )
         self.obs_type = obs_type
+        self.previous_frame = previous_frame
+        # Camera images of the last observation given, and those the next observation shows as the previous.
+        self._latest_frames: dict[str, np.ndarray] | None = None
+        self._previous_frames: dict[str, np.ndarray] | None = None
         self.render_mode = render_mode
         self.fps = fps
         self.metadata = {**self.metadata, "render_fps": fps}
@@ -133,16 +154,22 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
             "agent_pos": gym.spaces.Box(-np.inf, np.inf, shape=(self.state_dim,), dtype=np.float32),
             "goal_state": gym.spaces.Box(-np.inf, np.inf, shape=(self.state_dim,), dtype=np.float32),
         }
+        names = [n for c in self.camera_names for n in (c, GOAL_PREFIX + c)]
         if obs_type in ("rgb", "rgbd"):
             img = gym.spaces.Box(0, 255, shape=(cam.height, cam.width, 3), dtype=np.uint8)
-            spaces["pixels"] = gym.spaces.Dict({cam.name: img, GOAL_PREFIX + cam.name: img})
+            spaces["pixels"] = gym.spaces.Dict(dict.fromkeys(names, img))
         if obs_type == "rgbd":
             depth = gym.spaces.Box(
                 0, np.iinfo(np.uint16).max, shape=(cam.height, cam.width, 1), dtype=np.uint16
             )
-            spaces[depth_key(cam.name)] = depth
-            spaces[depth_key(GOAL_PREFIX + cam.name)] = depth
+            spaces.update({depth_key(n): depth for n in names})
         self.observation_space = gym.spaces.Dict(spaces)
+
+    @property
+    def camera_names(self) -> list[str]:
+        """The observation's camera names: the task camera, and ``<cam>_prev`` with ``previous_frame``."""
+        cam = self.camera_cfg.name
+        return [cam, previous_key(cam)] if self.previous_frame else [cam]
 
     # --- what a task provides -------------------------------------------------------------------
     def _build_model(self):
@@ -186,11 +213,13 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         self._elapsed = 0
+        self._previous_frames = None
         self._start_episode(options or {})
         self._render_goal_observation()
         return self._get_obs(), self._info()
 
     def step(self, action):
+        self._previous_frames = self._latest_frames
         self._apply_action(action)
         self._elapsed += 1
         info = self._info()
@@ -275,11 +304,18 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         if self.obs_type == "state":
             return obs
         current = self._camera_obs()
+        shown = [current]
+        if self.previous_frame:  # the images before this step's action; at reset, the start's own
+            shown.append(current if self._previous_frames is None else self._previous_frames)
+        self._latest_frames = current
         cam, goal_cam = self.camera_cfg.name, GOAL_PREFIX + self.camera_cfg.name
-        obs["pixels"] = {cam: current[cam], goal_cam: self._goal_obs[goal_cam].copy()}
-        if self.obs_type == "rgbd":
-            obs[depth_key(cam)] = current[depth_key(cam)]
-            obs[depth_key(goal_cam)] = self._goal_obs[depth_key(goal_cam)].copy()
+        obs["pixels"] = {}
+        for name, images in zip(self.camera_names, shown, strict=True):
+            obs["pixels"][name] = images[cam].copy()
+            obs["pixels"][GOAL_PREFIX + name] = self._goal_obs[goal_cam].copy()
+            if self.obs_type == "rgbd":
+                obs[depth_key(name)] = images[depth_key(cam)].copy()
+                obs[depth_key(GOAL_PREFIX + name)] = self._goal_obs[depth_key(goal_cam)].copy()
         return obs
 
     def _info(self) -> dict[str, Any]:

@@ -19,7 +19,7 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.rope_scene import check_link_colours, check_pusher_rest
-from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key
+from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key, previous_key
 
 GYM_NAMESPACE = "lerobot_indicator"
 SAWYER_REACH_TASK = "SawyerReach-v0"
@@ -40,6 +40,8 @@ class GoalEnvConfig(EnvConfig):
     camera: GoalCameraConfig = field(default_factory=GoalCameraConfig)
     state_dim: int = 3
     action_dim: int = 3
+    # Also give the previous step's images as camera <cam>_prev, compared, with the goal image as its goal.
+    previous_frame: bool = False
 
     def __post_init__(self):
         if isinstance(self.camera, dict):  # make_env_config("sawyer_reach", camera={...})
@@ -54,16 +56,19 @@ class GoalEnvConfig(EnvConfig):
             raise ValueError(f"fps must be > 0, got {self.fps}")
         if self.obs_type == "rgbd" and not self.camera.use_depth:
             raise ValueError("camera.use_depth must be true for obs_type 'rgbd'")
+        if self.previous_frame and self.obs_type == "state":
+            raise ValueError(
+                "previous_frame gives the previous step's camera images: obs_type 'state' has none"
+            )
         self.features = {
             ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(self.action_dim,)),
             "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(self.state_dim,)),
             "goal_state": PolicyFeature(type=FeatureType.STATE, shape=(self.state_dim,)),
         }
         self.features_map = {ACTION: ACTION, "agent_pos": OBS_STATE, "goal_state": goal_key(OBS_STATE)}
-        cam = self.camera.name
         h, w = self.camera.height, self.camera.width
         if self.obs_type in ("rgb", "rgbd"):
-            for name in (cam, GOAL_PREFIX + cam):
+            for name in self._image_names:
                 self.features[f"pixels/{name}"] = PolicyFeature(type=FeatureType.VISUAL, shape=(h, w, 3))
                 self.features_map[f"pixels/{name}"] = f"{OBS_IMAGES}.{name}"
         if self.obs_type == "rgbd":
@@ -72,11 +77,19 @@ class GoalEnvConfig(EnvConfig):
                 self.features_map[key] = f"{OBS_IMAGES}.{key}"
 
     @property
+    def _image_names(self) -> list[str]:
+        """The env's camera names with their goals: ``front``, ``goal_front`` (and ``front_prev``,
+        ``goal_front_prev`` with ``previous_frame``)."""
+        cam = self.camera.name
+        cameras = [cam, previous_key(cam)] if self.previous_frame else [cam]
+        return [n for c in cameras for n in (c, GOAL_PREFIX + c)]
+
+    @property
     def depth_keys(self) -> list[str]:
-        """Env observation keys of the depth maps (``front_depth``, ``goal_front_depth``)."""
+        """Env observation keys of the depth maps (``front_depth``, ``goal_front_depth``, ...)."""
         if self.obs_type != "rgbd":
             return []
-        return [depth_key(self.camera.name), depth_key(GOAL_PREFIX + self.camera.name)]
+        return [depth_key(n) for n in self._image_names]
 
     @property
     def package_name(self) -> str:
@@ -96,6 +109,7 @@ class GoalEnvConfig(EnvConfig):
             "max_episode_steps": self.episode_length,
             "episode_length": self.episode_length,
             "eval_reward": self.eval_reward,
+            "previous_frame": self.previous_frame,
         }
 
     def get_env_processors(self):

@@ -40,6 +40,12 @@ def previous_key(camera: str) -> str:
     return f"{camera}{PREVIOUS_SUFFIX}"
 
 
+def observed_cameras(camera: str, previous_frame: bool) -> list[str]:
+    """The camera names an env's observation holds: ``camera``, and ``previous_key(camera)`` with
+    ``previous_frame``."""
+    return [camera, previous_key(camera)] if previous_frame else [camera]
+
+
 def ground_truth_key(info_key: str) -> str:
     """``gt_distance -> observation.gt_distance``: the dataset / batch key of an ``info`` ground-truth key."""
     if not info_key.startswith("gt_"):

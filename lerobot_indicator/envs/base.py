@@ -37,7 +37,7 @@ from lerobot_indicator.keys import (
     GT_DESIRED_GOAL,
     GT_DISTANCE,
     depth_key,
-    previous_key,
+    observed_cameras,
 )
 
 OBS_TYPES = ("state", "rgb", "rgbd")
@@ -168,8 +168,7 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
     @property
     def camera_names(self) -> list[str]:
         """The observation's camera names: the task camera, and ``<cam>_prev`` with ``previous_frame``."""
-        cam = self.camera_cfg.name
-        return [cam, previous_key(cam)] if self.previous_frame else [cam]
+        return observed_cameras(self.camera_cfg.name, self.previous_frame)
 
     # --- what a task provides -------------------------------------------------------------------
     def _build_model(self):
@@ -311,10 +310,10 @@ class MujocoGoalEnv(gym.Env, abc.ABC):
         cam, goal_cam = self.camera_cfg.name, GOAL_PREFIX + self.camera_cfg.name
         obs["pixels"] = {}
         for name, images in zip(self.camera_names, shown, strict=True):
-            obs["pixels"][name] = images[cam].copy()
+            obs["pixels"][name] = images[cam]
             obs["pixels"][GOAL_PREFIX + name] = self._goal_obs[goal_cam].copy()
             if self.obs_type == "rgbd":
-                obs[depth_key(name)] = images[depth_key(cam)].copy()
+                obs[depth_key(name)] = images[depth_key(cam)]
                 obs[depth_key(GOAL_PREFIX + name)] = self._goal_obs[depth_key(goal_cam)].copy()
         return obs
 

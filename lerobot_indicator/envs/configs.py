@@ -19,7 +19,7 @@ from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 from lerobot_indicator.envs.base import EVAL_REWARDS, OBS_TYPES
 from lerobot_indicator.envs.hardware import EndEffectorConfig, GoalCameraConfig
 from lerobot_indicator.envs.rope_scene import check_link_colours, check_pusher_rest
-from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key, previous_key
+from lerobot_indicator.keys import GOAL_PREFIX, depth_key, goal_key, observed_cameras
 
 GYM_NAMESPACE = "lerobot_indicator"
 SAWYER_REACH_TASK = "SawyerReach-v0"
@@ -80,9 +80,9 @@ class GoalEnvConfig(EnvConfig):
     def _image_names(self) -> list[str]:
         """The env's camera names with their goals: ``front``, ``goal_front`` (and ``front_prev``,
         ``goal_front_prev`` with ``previous_frame``)."""
-        cam = self.camera.name
-        cameras = [cam, previous_key(cam)] if self.previous_frame else [cam]
-        return [n for c in cameras for n in (c, GOAL_PREFIX + c)]
+        return [
+            n for c in observed_cameras(self.camera.name, self.previous_frame) for n in (c, GOAL_PREFIX + c)
+        ]
 
     @property
     def depth_keys(self) -> list[str]:
